@@ -1,0 +1,446 @@
+#pragma once
+/// @file covariance.hpp
+/// Streaming, sans-IO accumulation of the Hankel covariances R1..R4 (paper Eq. 18) over the
+/// whole record and over each block (paper Eq. 19-21, conventions.md "Blocks").
+///
+/// Why lag sums: R_i^k is a sub-matrix of the Gram matrix of the stacked window
+/// w_c = [z_c; ...; z_{c+p+q-1}] over block k's columns. Its (s1, s2) block is a lag sum
+/// sum_t z_{t+l} z_t^T (l = s1 - s2) over a range shifted by s2, so it equals the block's lag
+/// sum over its own columns plus two short edge corrections at the block's boundaries.
+/// The state is therefore per block O((p+q) d^2) numbers plus p+q-1 samples per boundary:
+/// no data Hankel matrix, nothing proportional to the record length.
+///
+/// Why a shift: products are accumulated on z - a, with a the first sample. The mean is
+/// removed exactly at the end (products of sums), and because z - a is of the order of the
+/// signal, a DC offset of 1e4 standard deviations costs no precision.
+
+#include <Eigen/Core>
+
+#include <algorithm>
+#include <cmath>
+#include <map>
+
+#include "detail/checks.hpp"
+#include "errors.hpp"
+#include "layout.hpp"
+
+namespace modaluq {
+
+/// R1..R4 of a record and of each of its blocks.
+struct Covariances {
+    HankelLayout layout;            ///< channels, horizons, references
+    Index n_samples = 0;            ///< samples in the record
+    Index n_columns = 0;            ///< N = n_samples - p - q + 1 Hankel columns
+    Index block_length = 0;         ///< N_b, Hankel columns per block
+    Index n_blocks = 0;             ///< n_b = floor(N / N_b); trailing columns enter R only
+    Eigen::VectorXd channel_mean;   ///< mean removed per channel [y; u] (zeros when demean = false)
+    Eigen::MatrixXd R1;             ///< Y+ Y-^T / N   (p l x q r)
+    Eigen::MatrixXd R2;             ///< Y+ U+^T / N   (p l x p m), empty when output-only
+    Eigen::MatrixXd R3;             ///< U+ U+^T / N   (p m x p m)
+    Eigen::MatrixXd R4;             ///< Y- U+^T / N   (q r x p m)
+    /// Column k = r^k = [vec R1^k; vec R2^k; vec R3^k; vec R4^k] (column-major vec, / N_b).
+    Eigen::MatrixXd blocks;
+
+    bool has_inputs() const { return layout.n_inputs > 0; }
+
+    /// T_R = [r^1 - rbar, ..., r^nb - rbar] / sqrt(nb (nb - 1)), so that T_R T_R^T estimates
+    /// the covariance of r (conventions.md). Needs at least two blocks.
+    Eigen::MatrixXd covariance_factor() const {
+        detail::require(blocks.cols() >= 2, "n_blocks must be >= 2 for the uncertainty, got ",
+                        blocks.cols());
+        const double nb = static_cast<double>(blocks.cols());
+        Eigen::MatrixXd t = blocks.colwise() - blocks.rowwise().mean();
+        t /= std::sqrt(nb * (nb - 1.0));
+        return t;
+    }
+};
+
+/// Accumulates R1..R4 from chunks of samples of any length. Any chunking of a record gives
+/// the batch result; accumulators over consecutive spans can be merged.
+class CovarianceAccumulator {
+public:
+    /// @param layout        channels and horizons (validated)
+    /// @param block_length  N_b, Hankel columns per block (>= p + q)
+    /// @param demean        remove each channel's mean over the whole record
+    /// @param first_sample  index in the record of the first sample this accumulator sees;
+    ///                      non-zero only for a span that will be merged after another one
+    CovarianceAccumulator(HankelLayout layout, Index block_length, bool demean = true,
+                          Index first_sample = 0)
+        : layout_(std::move(layout)), block_length_(block_length), demean_(demean),
+          first_(first_sample), end_(first_sample) {
+        layout_.validate();
+        detail::require(block_length_ >= layout_.window(), "block_length must be >= p + q = ",
+                        layout_.window(), ", got ", block_length_);
+        detail::require(first_ >= 0, "first_sample must be >= 0, got ", first_);
+        d_ = layout_.n_channels();
+        lag_ = layout_.max_lag();
+        total_sum_ = Eigen::VectorXd::Zero(d_);
+        shift_ = Eigen::VectorXd::Zero(d_);
+        head_.resize(d_, 0);
+        tail_.resize(d_, 0);
+    }
+
+    const HankelLayout& layout() const { return layout_; }
+    Index block_length() const { return block_length_; }
+    Index first_sample() const { return first_; }
+    Index end_sample() const { return end_; }       ///< one past the last sample seen
+    Index n_samples() const { return end_ - first_; }
+    bool demean() const { return demean_; }
+
+    /// Feed samples. `y` is n_outputs x n (a column is one sample), `u` is n_inputs x n
+    /// (ignored, and may be empty, when the layout has no inputs).
+    void push(const Eigen::Ref<const Eigen::MatrixXd>& y,
+              const Eigen::Ref<const Eigen::MatrixXd>& u = Eigen::MatrixXd()) {
+        const Index n = y.cols();
+        detail::require(y.rows() == layout_.n_outputs, "y must have ", layout_.n_outputs,
+                        " channels (rows), got ", y.rows());
+        if (layout_.n_inputs > 0) {
+            detail::require(u.rows() == layout_.n_inputs, "u must have ", layout_.n_inputs,
+                            " channels (rows), got ", u.rows());
+            detail::require(u.cols() == n, "u must have as many samples as y (", n, "), got ",
+                            u.cols());
+        }
+        detail::require_finite(y, "y", end_);
+        if (layout_.n_inputs > 0) detail::require_finite(u, "u", end_);
+        if (n == 0) return;
+
+        Eigen::MatrixXd x(d_, n);
+        x.topRows(layout_.n_outputs) = y;
+        if (layout_.n_inputs > 0) x.bottomRows(layout_.n_inputs) = u;
+        if (!has_shift_) {
+            shift_ = x.col(0);
+            has_shift_ = true;
+        }
+        x.colwise() -= shift_;
+        append_shifted(x);
+    }
+
+    /// Append the state of `next`, an accumulator over the span that directly follows this
+    /// one (next.first_sample() == end_sample(), same layout, block length and demean).
+    void merge(const CovarianceAccumulator& next) {
+        detail::require(next.first_ == end_, "merge: the next span must start at sample ", end_,
+                        ", got ", next.first_);
+        detail::require(next.block_length_ == block_length_, "merge: block_length differs (",
+                        block_length_, " vs ", next.block_length_, ")");
+        detail::require(next.demean_ == demean_, "merge: demean differs");
+        detail::require(same_layout(next.layout_), "merge: the layouts differ");
+        if (next.n_samples() == 0) return;
+        if (!has_shift_) {
+            *this = next;
+            first_ = next.first_;  // (equal to the old end_)
+            return;
+        }
+        CovarianceAccumulator b = next;
+        b.rebase(shift_);
+
+        // Base times of this span that waited for the next span's samples.
+        const Index buf_start = end_ - tail_.cols();
+        Eigen::MatrixXd buf(d_, tail_.cols() + b.head_.cols());
+        buf << tail_, b.head_;
+        const Index t_to = std::min(end_, buf_start + buf.cols() - lag_);
+        process(buf, buf_start, buf_start, std::max(buf_start, t_to));
+        record_windows(b.head_, b.first_, /*create=*/false);
+
+        for (auto& [k, blk] : b.blocks_) {
+            auto it = blocks_.find(k);
+            if (it == blocks_.end()) blocks_.emplace(k, blk);
+            else {
+                it->second.sums += blk.sums;
+                it->second.count += blk.count;
+            }
+        }
+        for (auto& [bnd, w] : b.windows_) windows_.insert_or_assign(bnd, w);
+
+        if (head_.cols() < lag_) {
+            const Index take = std::min(lag_ - head_.cols(), b.head_.cols());
+            Eigen::MatrixXd h(d_, head_.cols() + take);
+            h << head_, b.head_.leftCols(take);
+            head_ = std::move(h);
+        }
+        if (b.n_samples() >= lag_) tail_ = b.tail_;
+        else {
+            Eigen::MatrixXd t(d_, tail_.cols() + b.tail_.cols());
+            t << tail_, b.tail_;
+            tail_ = t.rightCols(std::min(lag_, t.cols())).eval();
+        }
+        total_sum_ += b.total_sum_;
+        end_ = b.end_;
+    }
+
+    /// Number of complete blocks so far.
+    Index n_complete_blocks() const {
+        const Index n_cols = std::max<Index>(0, end_ - lag_);
+        return first_ == 0 ? n_cols / block_length_ : 0;
+    }
+
+    /// R1..R4 over all Hankel columns and over each complete block. The accumulator is left
+    /// unchanged (more samples can be pushed afterwards). Requires the accumulator to cover
+    /// the record from its first sample (first_sample() == 0).
+    /// @param with_blocks  compute the per-block matrices (needed for the uncertainty)
+    Covariances finish(bool with_blocks = true) const {
+        detail::require(first_ == 0,
+                        "finish: the accumulator starts at sample ", first_,
+                        "; merge it after the spans before it first");
+        const Index n_cols = end_ - lag_;
+        detail::require(n_cols >= layout_.window(), "record too short: ", n_samples(),
+                        " samples give ", std::max<Index>(0, n_cols),
+                        " Hankel columns; at least ", 2 * layout_.window() - 1,
+                        " samples are needed for block_rows + past_block_rows = ",
+                        layout_.window());
+        Covariances out;
+        out.layout = layout_;
+        out.n_samples = n_samples();
+        out.n_columns = n_cols;
+        out.block_length = block_length_;
+        out.n_blocks = n_cols / block_length_;
+
+        const double count = static_cast<double>(n_samples());
+        const Eigen::VectorXd centre =
+            demean_ ? Eigen::VectorXd(total_sum_ / count) : Eigen::VectorXd(-shift_);
+        out.channel_mean =
+            demean_ ? Eigen::VectorXd(shift_ + total_sum_ / count) : Eigen::VectorXd::Zero(d_);
+
+        // Whole record: all time blocks, boundaries 0 and N (the pending tail).
+        Eigen::MatrixXd sums = Eigen::MatrixXd::Zero((lag_ + 1) * d_, d_ + 1);
+        for (const auto& [k, blk] : blocks_) sums += blk.sums;
+        Targets whole = make_targets(out);
+        assemble(sums, window_at(0), tail_, static_cast<double>(n_cols), centre, whole);
+
+        if (with_blocks && out.n_blocks > 0) {
+            out.blocks.resize(layout_.n_covariance_entries(), out.n_blocks);
+            Targets t = make_targets(out);
+            for (Index k = 0; k < out.n_blocks; ++k) {
+                const Index c0 = k * block_length_, c1 = c0 + block_length_;
+                const Eigen::MatrixXd& w1 = (c1 == n_cols) ? tail_ : window_at(c1);
+                assemble(blocks_.at(k).sums, window_at(c0), w1,
+                         static_cast<double>(block_length_), centre, t);
+                vectorise(t, out.blocks.col(k));
+            }
+        }
+        out.R1 = std::move(whole.R1);
+        out.R2 = std::move(whole.R2);
+        out.R3 = std::move(whole.R3);
+        out.R4 = std::move(whole.R4);
+        return out;
+    }
+
+private:
+    struct BlockSums {
+        Eigen::MatrixXd sums;  ///< ((L+1) d) x (d+1): rows l*d.. = [sum x_{t+l} x_t^T | sum x_{t+l}]
+        Index count = 0;       ///< base times summed
+    };
+    struct Window {
+        Eigen::MatrixXd x;     ///< d x L: shifted samples [b, b + L) after boundary b
+        Index filled = 0;
+    };
+    struct Targets {
+        Eigen::MatrixXd R1, R2, R3, R4;
+    };
+
+    static constexpr Index kChunk = 2048;  // base times per GEMM
+
+    HankelLayout layout_;
+    Index block_length_;
+    bool demean_;
+    Index first_, end_;
+    Index d_ = 0, lag_ = 0;
+    bool has_shift_ = false;
+    Eigen::VectorXd shift_;
+    Eigen::VectorXd total_sum_;
+    std::map<Index, BlockSums> blocks_;   // keyed by block index k: base times [k N_b, (k+1) N_b)
+    std::map<Index, Window> windows_;     // keyed by boundary sample b = k N_b
+    Eigen::MatrixXd head_;                // first min(L, n) shifted samples
+    Eigen::MatrixXd tail_;                // last min(L, n) shifted samples (pending base times)
+
+    bool same_layout(const HankelLayout& o) const {
+        return o.n_outputs == layout_.n_outputs && o.n_inputs == layout_.n_inputs &&
+               o.p() == layout_.p() && o.q() == layout_.q() && o.references == layout_.references;
+    }
+
+    const Eigen::MatrixXd& window_at(Index b) const {
+        auto it = windows_.find(b);
+        if (it == windows_.end() || it->second.filled < lag_)
+            throw numerical_error("covariance accumulator: missing boundary samples (internal error)");
+        return it->second.x;
+    }
+
+    void append_shifted(const Eigen::MatrixXd& x) {
+        const Index n = x.cols();
+        total_sum_ += x.rowwise().sum();
+        if (head_.cols() < lag_) {
+            const Index take = std::min(lag_ - head_.cols(), n);
+            Eigen::MatrixXd h(d_, head_.cols() + take);
+            h << head_, x.leftCols(take);
+            head_ = std::move(h);
+        }
+        record_windows(x, end_, /*create=*/true);
+        const Index buf_start = end_ - tail_.cols();
+        Eigen::MatrixXd buf(d_, tail_.cols() + n);
+        buf << tail_, x;
+        const Index t_to = buf_start + buf.cols() - lag_;  // base times with all lags present
+        if (t_to > buf_start) process(buf, buf_start, buf_start, t_to);
+        tail_ = buf.rightCols(std::min(lag_, buf.cols())).eval();
+        end_ += n;
+    }
+
+    /// Copy the samples x (global indices [s0, s0 + n)) into the boundary windows they touch.
+    void record_windows(const Eigen::MatrixXd& x, Index s0, bool create) {
+        const Index n = x.cols();
+        if (n == 0) return;
+        const Index lo = std::max(first_, s0 - lag_ + 1);
+        for (Index k = detail::ceil_div(lo, block_length_); k * block_length_ < s0 + n; ++k) {
+            const Index b = k * block_length_;
+            auto it = windows_.find(b);
+            if (it == windows_.end()) {
+                if (!create || b < s0) continue;
+                it = windows_.emplace(b, Window{Eigen::MatrixXd::Zero(d_, lag_), 0}).first;
+            }
+            Window& w = it->second;
+            for (Index j = std::max(b + w.filled, s0); j < std::min(b + lag_, s0 + n); ++j) {
+                w.x.col(j - b) = x.col(j - s0);
+                w.filled = j - b + 1;
+            }
+        }
+    }
+
+    /// Add the lag sums of base times [t_from, t_to); buf holds samples from buf_start and
+    /// covers [t_from, t_to + L).
+    void process(const Eigen::MatrixXd& buf, Index buf_start, Index t_from, Index t_to) {
+        Eigen::MatrixXd stack, rhs;
+        for (Index t = t_from; t < t_to;) {
+            const Index k = t / block_length_;
+            const Index stop = std::min(t_to, (k + 1) * block_length_);
+            BlockSums& blk = blocks_[k];
+            if (blk.sums.size() == 0) blk.sums = Eigen::MatrixXd::Zero((lag_ + 1) * d_, d_ + 1);
+            for (Index c0 = t; c0 < stop; c0 += kChunk) {
+                const Index nc = std::min(kChunk, stop - c0);
+                const Index off = c0 - buf_start;
+                stack.resize((lag_ + 1) * d_, nc);
+                for (Index l = 0; l <= lag_; ++l) stack.middleRows(l * d_, d_) = buf.middleCols(off + l, nc);
+                rhs.resize(nc, d_ + 1);
+                rhs.leftCols(d_) = buf.middleCols(off, nc).transpose();
+                rhs.col(d_).setOnes();
+                blk.sums.noalias() += stack * rhs;
+            }
+            blk.count += stop - t;
+            t = stop;
+        }
+    }
+
+    /// Re-express the state on another shift (exact): x' = x + (shift_ - new_shift).
+    void rebase(const Eigen::VectorXd& new_shift) {
+        if (!has_shift_) return;
+        const Eigen::VectorXd delta = shift_ - new_shift;
+        if (delta.isZero(0.0)) return;
+        for (auto& [k, blk] : blocks_) {
+            const double n = static_cast<double>(blk.count);
+            const Eigen::VectorXd m0 = blk.sums.block(0, d_, d_, 1);
+            for (Index l = 0; l <= lag_; ++l) {
+                auto lam = blk.sums.block(l * d_, 0, d_, d_);
+                auto ml = blk.sums.block(l * d_, d_, d_, 1);
+                lam += ml * delta.transpose() + delta * m0.transpose() + n * delta * delta.transpose();
+                ml += n * delta;
+            }
+        }
+        for (auto& [b, w] : windows_) w.x.colwise() += delta;
+        head_.colwise() += delta;
+        tail_.colwise() += delta;
+        total_sum_ += static_cast<double>(n_samples()) * delta;
+        shift_ = new_shift;
+    }
+
+    Targets make_targets(const Covariances& c) const {
+        Targets t;
+        const Index a = layout_.rows_future(), b = layout_.rows_past(), pm = layout_.rows_input();
+        t.R1.resize(a, b);
+        if (c.has_inputs()) {
+            t.R2.resize(a, pm);
+            t.R3.resize(pm, pm);
+            t.R4.resize(b, pm);
+        }
+        return t;
+    }
+
+    static void vectorise(const Targets& t, Eigen::Ref<Eigen::VectorXd> out) {
+        Index pos = 0;
+        for (const Eigen::MatrixXd* m : {&t.R1, &t.R2, &t.R3, &t.R4}) {
+            out.segment(pos, m->size()) = Eigen::Map<const Eigen::VectorXd>(m->data(), m->size());
+            pos += m->size();
+        }
+    }
+
+    /// Build R1..R4 / n over columns [c0, c1) from the lag sums over those base times and the
+    /// samples after both boundaries (w0 after c0, w1 after c1).
+    void assemble(const Eigen::MatrixXd& sums, const Eigen::MatrixXd& w0, const Eigen::MatrixXd& w1,
+                  double n, const Eigen::VectorXd& centre, Targets& t) const {
+        const Index l = layout_.n_outputs, m = layout_.n_inputs, q = layout_.q();
+        const Index r = layout_.n_references();
+        Eigen::MatrixXd e0 = Eigen::MatrixXd::Zero((lag_ + 1) * d_, d_);
+        Eigen::MatrixXd e1 = Eigen::MatrixXd::Zero((lag_ + 1) * d_, d_);
+        Eigen::MatrixXd g(d_, d_);
+        for (Index s2 = 0; s2 <= lag_; ++s2) {
+            // e0, e1 hold sum_{t in [b, b+s2)} x_{t+l} x_t^T for both boundaries.
+            for (Index lg = 0; s2 + lg <= lag_; ++lg) {
+                const Index s1 = s2 + lg;
+                const bool past_future = s2 < q && s1 >= q;
+                const bool future_future = m > 0 && s2 >= q;
+                if (!past_future && !future_future) continue;
+                g = sums.block(lg * d_, 0, d_, d_) + e1.block(lg * d_, 0, d_, d_) -
+                    e0.block(lg * d_, 0, d_, d_);
+                const auto m1 = sums.block(s1 * d_, d_, d_, 1);  // sum_c x_{c+s1}
+                const auto m2 = sums.block(s2 * d_, d_, d_, 1);  // sum_c x_{c+s2}
+                g -= m1 * centre.transpose() + centre * m2.transpose() - n * centre * centre.transpose();
+                g /= n;
+                if (past_future) {
+                    const Index i = s1 - q, j = s2;
+                    for (Index jr = 0; jr < r; ++jr) {
+                        const Index ref = layout_.reference(jr);
+                        t.R1.block(i * l, j * r + jr, l, 1) = g.block(0, ref, l, 1);
+                        if (m > 0) t.R4.block(j * r + jr, i * m, 1, m) = g.block(l, ref, m, 1).transpose();
+                    }
+                } else {
+                    const Index i = s1 - q, i2 = s2 - q;
+                    t.R2.block(i * l, i2 * m, l, m) = g.block(0, l, l, m);
+                    t.R3.block(i * m, i2 * m, m, m) = g.block(l, l, m, m);
+                    if (i != i2) {
+                        t.R2.block(i2 * l, i * m, l, m) = g.block(l, 0, m, l).transpose();
+                        t.R3.block(i2 * m, i * m, m, m) = g.block(l, l, m, m).transpose();
+                    }
+                }
+            }
+            if (s2 < lag_) {
+                const Index len = (lag_ - s2) * d_;  // lags 0 .. L-s2-1 still needed
+                e0.topRows(len).noalias() +=
+                    Eigen::Map<const Eigen::VectorXd>(w0.data() + s2 * d_, len) * w0.col(s2).transpose();
+                e1.topRows(len).noalias() +=
+                    Eigen::Map<const Eigen::VectorXd>(w1.data() + s2 * d_, len) * w1.col(s2).transpose();
+            }
+        }
+    }
+};
+
+/// Batch covariances of a whole record. y is n_outputs x n_samples, u is n_inputs x n_samples
+/// (empty for output-only). N_b = floor(N / n_blocks); n_blocks = 1 gives no uncertainty data.
+inline Covariances compute_covariances(const Eigen::Ref<const Eigen::MatrixXd>& y,
+                                       const Eigen::Ref<const Eigen::MatrixXd>& u,
+                                       HankelLayout layout, Index n_blocks, bool demean = true,
+                                       bool with_blocks = true) {
+    layout.n_outputs = y.rows();
+    layout.n_inputs = u.size() == 0 ? 0 : u.rows();
+    layout.validate();
+    detail::require(n_blocks >= 1, "n_blocks must be >= 1, got ", n_blocks);
+    if (layout.n_inputs > 0)
+        detail::require(u.cols() == y.cols(), "u must have as many samples as y (", y.cols(),
+                        "), got ", u.cols());
+    const Index w = layout.window();
+    const Index min_samples = n_blocks * w + w - 1;
+    detail::require(y.cols() >= min_samples, "record too short: ", y.cols(), " samples; n_blocks = ",
+                    n_blocks, " blocks of at least p + q = ", w,
+                    " Hankel columns need at least ", min_samples, " samples");
+    const Index n_cols = y.cols() - layout.max_lag();
+    CovarianceAccumulator acc(layout, n_cols / n_blocks, demean);
+    acc.push(y, u);
+    return acc.finish(with_blocks);
+}
+
+}  // namespace modaluq

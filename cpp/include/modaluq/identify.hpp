@@ -1,0 +1,170 @@
+#pragma once
+/// @file identify.hpp
+/// The whole pipeline: samples (or accumulated covariances) -> H -> one SVD -> modes and their
+/// standard deviations at every requested order.
+
+#include <Eigen/Core>
+
+#include <algorithm>
+#include <cmath>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "covariance.hpp"
+#include "modal.hpp"
+#include "realization.hpp"
+#include "subspace.hpp"
+#include "uncertainty.hpp"
+
+namespace modaluq {
+
+/// Settings of an identification. Defaults follow conventions.md.
+struct IdentifyOptions {
+    double fs = 0.0;                ///< sampling frequency in Hz (required, finite, > 0)
+    Index block_rows = 0;           ///< p, future block rows (required, >= 2)
+    Index past_block_rows = 0;      ///< q, past block rows; 0 means q = p
+    std::vector<Index> orders;      ///< model orders (required, >= 1); sorted, duplicates dropped
+    Index n_blocks = 50;            ///< blocks of the uncertainty (>= 2 when uncertainty is on)
+    std::vector<Index> references;  ///< outputs forming the past data matrix; empty = all
+    bool uncertainty = true;        ///< propagate the covariance; false skips all of it
+    bool demean = true;             ///< remove each channel's mean over the record
+    double input_rcond = 1e-10;     ///< R3 eigenvalues below this times the largest are dropped
+
+    void validate() const {
+        detail::require(std::isfinite(fs) && fs > 0.0, "fs must be a finite sampling frequency > 0 Hz, got ", fs);
+        detail::require(block_rows >= 2, "block_rows must be >= 2, got ", block_rows);
+        detail::require(past_block_rows >= 0, "past_block_rows must be >= 1, got ", past_block_rows);
+        detail::require(!orders.empty(), "orders must name at least one model order");
+        for (Index n : orders) detail::require(n >= 1, "orders must be >= 1, got ", n);
+        if (uncertainty) detail::require(n_blocks >= 2, "n_blocks must be >= 2, got ", n_blocks);
+        detail::require(input_rcond >= 0.0 && input_rcond < 1.0, "input_rcond must be in [0, 1), got ", input_rcond);
+    }
+
+    HankelLayout layout(Index n_outputs, Index n_inputs) const {
+        HankelLayout L;
+        L.n_outputs = n_outputs;
+        L.n_inputs = n_inputs;
+        L.block_rows = block_rows;
+        L.past_block_rows = past_block_rows;
+        L.references = references;
+        return L;
+    }
+};
+
+/// Everything an identification returns.
+struct Identification {
+    std::vector<Modes> modes;            ///< one entry per requested order, ascending order
+    Eigen::VectorXd singular_values;     ///< of H, all min(p l, q r)
+    Index n_samples = 0;                 ///< samples in the record
+    Index n_columns = 0;                 ///< Hankel columns N
+    Index block_length = 0;              ///< N_b (0 without uncertainty)
+    Index n_blocks = 0;                  ///< blocks used for the uncertainty (0 without)
+    Eigen::VectorXd channel_mean;        ///< mean removed per channel [y; u]
+    Index input_rank = 0;                ///< numerical rank of R3 (input/output only)
+    double input_condition = 0.0;        ///< condition number of R3 (input/output only)
+    bool input_rank_deficient = false;   ///< R3 singular: inputs constant, duplicated or not exciting
+    bool too_few_blocks = false;         ///< n_b - 1 < 2 + 2 l: a mode's joint covariance is rank deficient
+    std::vector<std::string> warnings;   ///< what the flags above mean for this run, in words
+
+    /// The modes at model order n (throws invalid_argument if n was not requested).
+    const Modes& at_order(Index n) const {
+        for (const Modes& m : modes)
+            if (m.order == n) return m;
+        detail::fail("order ", n, " was not identified; the identified orders are ",
+                     modes.empty() ? Index(0) : modes.front().order, "..",
+                     modes.empty() ? Index(0) : modes.back().order);
+    }
+};
+
+/// Identify from accumulated covariances (for example from a CovarianceAccumulator fed in
+/// chunks). `cov` must carry per-block matrices when options.uncertainty is on.
+inline Identification identify(const Covariances& cov, IdentifyOptions options) {
+    options.validate();
+    std::sort(options.orders.begin(), options.orders.end());
+    options.orders.erase(std::unique(options.orders.begin(), options.orders.end()), options.orders.end());
+    const HankelLayout& L = cov.layout;
+    const Index n_max = options.orders.back();
+    detail::require(n_max <= L.max_order(), "order ", n_max,
+                    " is above what the horizons support: min((block_rows - 1) * n_outputs, past_block_rows * n_references) = ",
+                    L.max_order());
+    if (options.uncertainty)
+        detail::require(cov.blocks.cols() >= 2, "n_blocks must be >= 2 for the uncertainty, the covariances have ",
+                        cov.blocks.cols(), " complete blocks");
+
+    Identification out;
+    out.n_samples = cov.n_samples;
+    out.n_columns = cov.n_columns;
+    out.channel_mean = cov.channel_mean;
+    const SubspaceMatrix sub = subspace_matrix(cov, options.input_rcond);
+    if (cov.has_inputs()) {
+        out.input_rank = sub.input_rank;
+        out.input_condition = sub.input_condition;
+        out.input_rank_deficient = sub.input_rank_deficient;
+        if (sub.input_rank_deficient)
+            out.warnings.push_back(detail::concat(
+                "the input covariance R3 is rank deficient (rank ", sub.input_rank, " of ", L.rows_input(),
+                "): inputs are constant, duplicated or not exciting enough for block_rows = ", L.p(),
+                "; their effect was removed only in the subspace they span and the uncertainty is not reliable"));
+    }
+    const Realization re(sub.H, L.n_outputs, n_max);
+    out.singular_values = re.singular_values();
+
+    std::unique_ptr<UncertaintyPropagator> prop;
+    Eigen::MatrixXd t_h;
+    double block_seconds = 0.0;
+    if (options.uncertainty) {
+        out.n_blocks = cov.blocks.cols();
+        out.block_length = cov.block_length;
+        block_seconds = static_cast<double>(cov.block_length) / options.fs;
+        out.too_few_blocks = out.n_blocks - 1 < 2 + 2 * L.n_outputs;
+        if (out.too_few_blocks)
+            out.warnings.push_back(detail::concat(
+                "n_blocks = ", out.n_blocks, " is too few for the joint covariance of the ", 2 + 2 * L.n_outputs,
+                " parameters of a mode (need at least ", 3 + 2 * L.n_outputs, "); the standard deviations are still valid"));
+        t_h = propagate_to_subspace(sub, cov, cov.covariance_factor());
+        prop = std::make_unique<UncertaintyPropagator>(re, t_h, L.rows_past());
+    }
+    out.modes.reserve(options.orders.size());
+    Index short_blocks = 0;
+    for (Index n : options.orders) {
+        const StateSpace ss = re.system(n);
+        detail::Eigenstructure eig;
+        Modes m = modes_from_system(ss, options.fs, prop ? &eig : nullptr);
+        if (prop) {
+            prop->apply(m, eig, ss, options.fs, block_seconds);
+            short_blocks += m.block_too_short.count();
+        }
+        out.modes.push_back(std::move(m));
+    }
+    if (short_blocks > 0)
+        out.warnings.push_back(detail::concat(
+            short_blocks, " pole(s) decay more slowly than the blocks are long (block of ", block_seconds,
+            " s < half of 1/(2 pi f xi)); their standard deviations are less reliable: use fewer, longer blocks"));
+    return out;
+}
+
+/// Identify from samples. y is n_outputs x n_samples (a column is one sample: the memory of a
+/// C-contiguous NumPy (n_samples, n_outputs) array); u is n_inputs x n_samples or empty.
+inline Identification identify(const Eigen::Ref<const Eigen::MatrixXd>& y,
+                               const Eigen::Ref<const Eigen::MatrixXd>& u, IdentifyOptions options) {
+    options.validate();
+    detail::require(y.rows() >= 1, "y must have at least one output channel");
+    detail::require(u.size() == 0 || u.cols() == y.cols(), "u must have as many samples as y (", y.cols(),
+                    "), got ", u.cols());
+    detail::require_finite(y, "y");
+    if (u.size() > 0) detail::require_finite(u, "u");
+    HankelLayout L = options.layout(y.rows(), u.size() == 0 ? 0 : u.rows());
+    L.validate();
+    if (!options.orders.empty()) {
+        const Index n_max = *std::max_element(options.orders.begin(), options.orders.end());
+        detail::require(n_max <= L.max_order(), "order ", n_max,
+                        " is above what the horizons support: min((block_rows - 1) * n_outputs, past_block_rows * n_references) = ",
+                        L.max_order());
+    }
+    const Index n_blocks = options.uncertainty ? options.n_blocks : 1;
+    const Covariances cov = compute_covariances(y, u, L, n_blocks, options.demean, options.uncertainty);
+    return identify(cov, options);
+}
+
+}  // namespace modaluq

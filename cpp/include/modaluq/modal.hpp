@@ -1,0 +1,111 @@
+#pragma once
+/// @file modal.hpp
+/// Modal parameters from (A, C) (paper Eq. 5, conventions.md "Modes").
+
+#include <Eigen/Core>
+#include <Eigen/Eigenvalues>
+#include <Eigen/LU>
+
+#include <algorithm>
+#include <cmath>
+#include <complex>
+#include <limits>
+#include <numeric>
+#include <vector>
+
+#include "realization.hpp"
+
+namespace modaluq {
+
+/// The modes identified at one model order, sorted by frequency. One mode per complex
+/// conjugate pair of eigenvalues (Im lambda > 0); real eigenvalues are dropped.
+struct Modes {
+    Index order = 0;                     ///< model order n
+    Eigen::VectorXcd eigenvalue;         ///< discrete-time eigenvalue lambda of A
+    Eigen::VectorXd frequency_hz;        ///< |mu| / (2 pi), mu = ln(lambda) fs, in Hz
+    Eigen::VectorXd damping_ratio;       ///< -Re(mu) / |mu|, a fraction (0.02 = 2 %)
+    Eigen::MatrixXcd mode_shape;         ///< l x n_modes, C phi scaled so its largest-modulus component is 1
+    Eigen::VectorXi reference_component; ///< per mode, the component scaled to exactly 1
+
+    // Uncertainty (empty when not computed); first-order, from the block covariance.
+    Eigen::VectorXd frequency_std;       ///< Hz
+    Eigen::VectorXd damping_std;         ///< fraction
+    Eigen::MatrixXd mode_shape_std_real; ///< l x n_modes, std of Re of the normalised shape
+    Eigen::MatrixXd mode_shape_std_imag; ///< l x n_modes, std of Im of the normalised shape
+    /// (2 + 2l)^2 x n_modes; column i is mode i's covariance of [f, xi, Re shape, Im shape]
+    /// (symmetric, so row- and column-major readings agree).
+    Eigen::MatrixXd covariance;
+    /// Per mode: the block is shorter than half the mode's decay time constant
+    /// 1/(2 pi f xi), so the blocks are not independent enough for its covariance (uq-math §10.7).
+    Eigen::Array<bool, Eigen::Dynamic, 1> block_too_short;
+    /// (sigma_n - sigma_{n+1}) / std(sigma_n - sigma_{n+1}); NaN without uncertainty.
+    double singular_value_gap = std::numeric_limits<double>::quiet_NaN();
+    /// The order cuts singular values closer than three times their uncertainty, so its
+    /// first-order uncertainty is not meaningful (uq-math §5.4).
+    bool close_singular_values = false;
+
+    Index n_modes() const { return frequency_hz.size(); }
+};
+
+namespace detail {
+
+/// Eigen-decomposition of A kept for the uncertainty: A = V diag(values) V^{-1}; the rows of
+/// V^{-1} are left eigenvectors chi^H with chi_i^H phi_i = 1.
+struct Eigenstructure {
+    Eigen::VectorXcd values;
+    Eigen::MatrixXcd right;      ///< V
+    Eigen::MatrixXcd left_h;     ///< V^{-1}
+    std::vector<Index> kept;     ///< index into values of each reported mode, in frequency order
+};
+
+}  // namespace detail
+
+/// Modes of (A, C) sampled at fs Hz. If `eig` is given, the eigen-decomposition is stored
+/// there for the uncertainty propagation.
+inline Modes modes_from_system(const StateSpace& ss, double fs, detail::Eigenstructure* eig = nullptr) {
+    using cd = std::complex<double>;
+    const Index n = ss.A.rows();
+    Eigen::EigenSolver<Eigen::MatrixXd> es(ss.A, /*computeEigenvectors=*/true);
+    if (es.info() != Eigen::Success) throw numerical_error("eigen-decomposition of A did not converge");
+    const Eigen::VectorXcd values = es.eigenvalues();
+    std::vector<Index> kept;
+    for (Index i = 0; i < n; ++i)
+        if (values(i).imag() > 0.0) kept.push_back(i);
+    std::vector<double> freq(n, 0.0);
+    for (Index i : kept) freq[i] = std::abs(std::log(values(i)) * fs) / (2.0 * detail::pi);
+    std::stable_sort(kept.begin(), kept.end(), [&](Index a, Index b) { return freq[a] < freq[b]; });
+
+    const Index nm = static_cast<Index>(kept.size());
+    const Eigen::MatrixXcd vectors = es.eigenvectors();
+    Modes m;
+    m.order = n;
+    m.eigenvalue.resize(nm);
+    m.frequency_hz.resize(nm);
+    m.damping_ratio.resize(nm);
+    m.mode_shape.resize(ss.C.rows(), nm);
+    m.reference_component.resize(nm);
+    for (Index i = 0; i < nm; ++i) {
+        const cd lambda = values(kept[i]);
+        const cd mu = std::log(lambda) * fs;
+        m.eigenvalue(i) = lambda;
+        m.frequency_hz(i) = std::abs(mu) / (2.0 * detail::pi);
+        m.damping_ratio(i) = -mu.real() / std::abs(mu);
+        Eigen::VectorXcd shape = ss.C * vectors.col(kept[i]);
+        Index k;
+        shape.cwiseAbs().maxCoeff(&k);
+        const cd pivot = shape(k);
+        shape /= pivot;
+        shape(k) = 1.0;
+        m.mode_shape.col(i) = shape;
+        m.reference_component(i) = static_cast<int>(k);
+    }
+    if (eig) {
+        eig->values = values;
+        eig->right = vectors;
+        eig->left_h = vectors.partialPivLu().inverse();
+        eig->kept = kept;
+    }
+    return m;
+}
+
+}  // namespace modaluq

@@ -1,0 +1,234 @@
+#pragma once
+/// @file uncertainty.hpp
+/// First-order propagation of the block covariance of R1..R4 to the modal parameters at
+/// every order (uq-math §5-§9; Doehler & Mevel 2013). The covariance is carried as its
+/// factor T (Sigma = T T^T), one column per block: no h x h matrix is ever formed.
+///
+/// Stages (each a function in `detail`, each finite-difference tested):
+///  1. T_H = J_{H,R} T_R                               subspace.hpp
+///  2. dGamma for j <= n_max, once                      gamma_perturbation
+///     (the singular system B_j [du; dv] = C_j vec dH of uq-math §5.1 solved in the SVD
+///     basis, where it is diagonal: same minimum-norm solution, no b x b solve per j)
+///  3. Q1..Q4 once at n_max; order n uses their leading n x n blocks    q_matrices
+///  4. per order and block: dA phi, d lambda, d phi, d(C phi)           eigen_perturbation
+///  5. per mode: f, xi and the normalised mode shape                    modal_perturbation
+
+#include <Eigen/Core>
+
+#include <cmath>
+#include <complex>
+#include <limits>
+#include <vector>
+
+#include "modal.hpp"
+#include "realization.hpp"
+
+namespace modaluq {
+namespace detail {
+
+using cd = std::complex<double>;
+
+/// Stage 2: dGamma (a x n) for one perturbation dH of H, and d sigma_j for j < n_sigma.
+/// du_j = U (Omega_j - U^T dH v_j / s_j) + dH v_j / s_j with
+/// Omega_ij = (s_j u_i^T dH v_j + s_i u_j^T dH v_i) / (s_j^2 - s_i^2), Omega_jj = 0;
+/// d gamma_j = u_j d s_j / (2 sqrt s_j) + sqrt(s_j) du_j  (uq-math §5.1-5.3).
+inline Eigen::MatrixXd gamma_perturbation(const Realization& re, const Eigen::Ref<const Eigen::MatrixXd>& dh,
+                                          Index n, Eigen::VectorXd* dsigma = nullptr, Index n_sigma = 0) {
+    const Eigen::MatrixXd& U = re.U();
+    const Eigen::MatrixXd& V = re.V();
+    const Eigen::VectorXd& s = re.singular_values();
+    const Index r = s.size();
+    const Index n1 = std::max(n, std::min(n_sigma, r));
+    const Eigen::MatrixXd P = dh * V.leftCols(n1);                     // dH v_j
+    const Eigen::MatrixXd Ua = U.transpose() * P;                       // u_i^T dH v_j
+    const Eigen::MatrixXd Ub = (U.leftCols(n).transpose() * dh) * V;    // u_j^T dH v_i
+    if (dsigma) *dsigma = Ua.diagonal().head(std::min(n_sigma, r));
+    Eigen::MatrixXd omega(r, n);
+    for (Index j = 0; j < n; ++j) {
+        for (Index i = 0; i < r; ++i)
+            omega(i, j) = (i == j) ? 0.0 : (s(j) * Ua(i, j) + s(i) * Ub(j, i)) / (s(j) * s(j) - s(i) * s(i));
+        omega.col(j) -= Ua.col(j) / s(j);
+    }
+    const Eigen::ArrayXd sq = s.head(n).array().sqrt();
+    Eigen::MatrixXd dg = U * omega;
+    dg += P.leftCols(n) * s.head(n).cwiseInverse().asDiagonal();
+    dg = dg * sq.matrix().asDiagonal();
+    dg += U.leftCols(n) * (Ua.diagonal().head(n).array() / (2.0 * sq)).matrix().asDiagonal();
+    return dg;
+}
+
+/// Stage 3 for one block: Qa = Q3 + Q2^T, Qb = Q1 + Q1^T, Q4 = dC, with
+/// Q1 = Gamma_up^T dGamma_up, Q2 = Gamma_dw^T dGamma_up, Q3 = Gamma_up^T dGamma_dw (uq-math §9).
+inline void q_matrices(const Eigen::MatrixXd& gamma, const Eigen::MatrixXd& dgamma, Index l,
+                       Eigen::Ref<Eigen::MatrixXd> qa, Eigen::Ref<Eigen::MatrixXd> qb,
+                       Eigen::Ref<Eigen::MatrixXd> q4) {
+    const Index rows = gamma.rows() - l;
+    const auto g_up = gamma.topRows(rows), g_dw = gamma.bottomRows(rows);
+    const auto d_up = dgamma.topRows(rows), d_dw = dgamma.bottomRows(rows);
+    const Eigen::MatrixXd q1 = g_up.transpose() * d_up;
+    qa.noalias() = g_up.transpose() * d_dw;
+    qa.noalias() += d_up.transpose() * g_dw;
+    qb = q1 + q1.transpose();
+    q4 = dgamma.topRows(l);
+}
+
+/// What one order's eigenstructure needs for stage 4.
+struct OrderContext {
+    Eigen::MatrixXcd phi;        ///< n x nm right eigenvectors of the reported modes
+    Eigen::VectorXcd lambda;     ///< their eigenvalues
+    Eigen::VectorXcd den;        ///< chi^H phi
+    Eigen::MatrixXcd rn;         ///< R_n of Gamma_up = Q R (complex copy), W_n = (R_n^T R_n)^{-1}
+    Eigen::MatrixXcd cv;         ///< C_n V
+    const Eigenstructure* eig = nullptr;
+
+    OrderContext(const Eigenstructure& e, const StateSpace& ss, const Realization& re) : eig(&e) {
+        const Index n = ss.A.rows(), nm = static_cast<Index>(e.kept.size());
+        phi.resize(n, nm);
+        lambda.resize(nm);
+        den.resize(nm);
+        for (Index i = 0; i < nm; ++i) {
+            const Index ki = e.kept[i];
+            phi.col(i) = e.right.col(ki);
+            lambda(i) = e.values(ki);
+            den(i) = (e.left_h.row(ki) * e.right.col(ki))(0, 0);  // = 1 up to rounding
+        }
+        rn = re.gamma_up_r().topLeftCorner(n, n).cast<cd>();
+        cv = ss.C.cast<cd>() * e.right;
+    }
+};
+
+/// Stage 4 for one block: d lambda_i (nm) and d(C phi_i) (l x nm) from that block's Q
+/// matrices restricted to the order (leading n x n blocks):
+/// Z = Qa phi - lambda Qb phi, dA phi = W Z, d lambda = chi^H dA phi / chi^H phi,
+/// d phi = sum_{j != i} phi_j chi_j^H (dA phi - phi d lambda) / (lambda_i - lambda_j)
+/// (a particular solution; the normalised mode shape does not depend on which, uq-math §7).
+inline void eigen_perturbation(const OrderContext& ctx, const Eigen::Ref<const Eigen::MatrixXd>& qa,
+                               const Eigen::Ref<const Eigen::MatrixXd>& qb,
+                               const Eigen::Ref<const Eigen::MatrixXd>& q4, Eigen::Ref<Eigen::VectorXcd> dlambda,
+                               Eigen::Ref<Eigen::MatrixXcd> dshape) {
+    const Eigenstructure& e = *ctx.eig;
+    const Index n = ctx.phi.rows(), nm = ctx.phi.cols();
+    Eigen::MatrixXcd z = qa.cast<cd>() * ctx.phi;
+    z.noalias() -= (qb.cast<cd>() * ctx.phi) * ctx.lambda.asDiagonal();
+    ctx.rn.transpose().triangularView<Eigen::Lower>().solveInPlace(z);
+    ctx.rn.triangularView<Eigen::Upper>().solveInPlace(z);
+    const Eigen::MatrixXcd proj = e.left_h * z;  // chi_j^H dA phi_i
+    Eigen::VectorXcd coef(n);
+    for (Index i = 0; i < nm; ++i) {
+        const Index ki = e.kept[i];
+        dlambda(i) = proj(ki, i) / ctx.den(i);
+        for (Index j = 0; j < n; ++j) coef(j) = (j == ki) ? cd(0.0) : proj(j, i) / (ctx.lambda(i) - e.values(j));
+        dshape.col(i) = ctx.cv * coef + q4.cast<cd>() * ctx.phi.col(i);
+    }
+}
+
+/// Stage 5 for one mode: rows [f, xi, Re shape (l), Im shape (l)] of the perturbation factor
+/// from d lambda (1 x nb) and d(C phi) (l x nb) (uq-math §7, normalised shape with the
+/// reference component fixed at its nominal index).
+inline Eigen::MatrixXd modal_perturbation(cd lambda, double fs, const Eigen::VectorXcd& raw_shape, Index kref,
+                                          const Eigen::Ref<const Eigen::RowVectorXcd>& dlambda,
+                                          const Eigen::Ref<const Eigen::MatrixXcd>& dshape) {
+    const Index l = raw_shape.size(), nb = dlambda.size();
+    const cd mu = std::log(lambda) * fs;
+    const double amu = std::abs(mu);
+    Eigen::MatrixXd ut(2 + 2 * l, nb);
+    const Eigen::RowVectorXcd dmu = dlambda * (fs / lambda);  // d mu = fs d lambda / lambda
+    const Eigen::ArrayXd dre = dmu.real().transpose().array(), dim = dmu.imag().transpose().array();
+    ut.row(0) = ((mu.real() * dre + mu.imag() * dim) / (2.0 * pi * amu)).matrix().transpose();
+    ut.row(1) = ((-mu.imag() * mu.imag() * dre + mu.real() * mu.imag() * dim) / (amu * amu * amu)).matrix().transpose();
+    const cd pivot = raw_shape(kref);
+    const Eigen::VectorXcd shape = raw_shape / pivot;
+    Eigen::MatrixXcd dn = (dshape - shape * dshape.row(kref)) / pivot;
+    dn.row(kref).setZero();
+    ut.middleRows(2, l) = dn.real();
+    ut.middleRows(2 + l, l) = dn.imag();
+    return ut;
+}
+
+}  // namespace detail
+
+/// Sensitivities computed once at the largest order and reused by every order.
+class UncertaintyPropagator {
+public:
+    /// @param re   the realization (SVD of H, Gamma at n_max)
+    /// @param t_h  T_H, (a b) x n_b: column k is vec dH^k (column-major)
+    /// @param b    columns of H
+    UncertaintyPropagator(const Realization& re, const Eigen::MatrixXd& t_h, Index b) : re_(re), nb_(t_h.cols()) {
+        const Index a = re.U().rows(), n = re.max_order(), l = re.n_outputs();
+        const Index n_sigma = std::min<Index>(n + 1, re.singular_values().size());
+        detail::require(t_h.rows() == a * b, "T_H must have a*b rows");
+        dsigma_.resize(n_sigma, nb_);
+        qa_.resize(n, n * nb_);
+        qb_.resize(n, n * nb_);
+        q4_.resize(l, n * nb_);
+        Eigen::VectorXd ds;
+        for (Index k = 0; k < nb_; ++k) {
+            Eigen::Map<const Eigen::MatrixXd> dh(t_h.col(k).data(), a, b);
+            const Eigen::MatrixXd dg = detail::gamma_perturbation(re, dh, n, &ds, n_sigma);
+            dsigma_.col(k) = ds;
+            detail::q_matrices(re.observability(), dg, l, qa_.middleCols(k * n, n), qb_.middleCols(k * n, n),
+                               q4_.middleCols(k * n, n));
+        }
+    }
+
+    Index n_blocks() const { return nb_; }
+
+    /// Fill the uncertainty fields of `modes` (order n) from its eigenstructure.
+    /// @param block_seconds  duration of one block, N_b / fs, for the block-length check
+    void apply(Modes& modes, const detail::Eigenstructure& eig, const StateSpace& ss, double fs,
+               double block_seconds) const {
+        using detail::cd;
+        const Index n = modes.order, nm = modes.n_modes(), l = re_.n_outputs(), N = re_.max_order();
+        const Index np = 2 + 2 * l;
+        modes.frequency_std.resize(nm);
+        modes.damping_std.resize(nm);
+        modes.mode_shape_std_real.resize(l, nm);
+        modes.mode_shape_std_imag.resize(l, nm);
+        modes.covariance.resize(np * np, nm);
+        modes.block_too_short.resize(nm);
+
+        // Singular-value gap at this order, judged against its own uncertainty.
+        const Eigen::VectorXd& s = re_.singular_values();
+        const double sd_gap = (n < dsigma_.rows()) ? (dsigma_.row(n - 1) - dsigma_.row(n)).norm()
+                                                   : dsigma_.row(n - 1).norm();
+        modes.singular_value_gap = ((n < s.size()) ? s(n - 1) - s(n) : s(n - 1)) / sd_gap;
+        modes.close_singular_values = !(modes.singular_value_gap >= 3.0);
+        if (nm == 0) return;
+
+        const detail::OrderContext ctx(eig, ss, re_);
+        Eigen::MatrixXcd dlam(nm, nb_);
+        std::vector<Eigen::MatrixXcd> dshape(nm, Eigen::MatrixXcd(l, nb_));
+        Eigen::VectorXcd dl(nm);
+        Eigen::MatrixXcd ds(l, nm);
+        for (Index k = 0; k < nb_; ++k) {
+            detail::eigen_perturbation(ctx, qa_.block(0, k * N, n, n), qb_.block(0, k * N, n, n),
+                                       q4_.block(0, k * N, l, n), dl, ds);
+            dlam.col(k) = dl;
+            for (Index i = 0; i < nm; ++i) dshape[i].col(k) = ds.col(i);
+        }
+        for (Index i = 0; i < nm; ++i) {
+            const Eigen::VectorXcd raw = ss.C.cast<cd>() * ctx.phi.col(i);
+            const Eigen::MatrixXd ut = detail::modal_perturbation(ctx.lambda(i), fs, raw, modes.reference_component(i),
+                                                                  dlam.row(i), dshape[i]);
+            const Eigen::MatrixXd cov = ut * ut.transpose();
+            modes.covariance.col(i) = Eigen::Map<const Eigen::VectorXd>(cov.data(), np * np);
+            const Eigen::VectorXd sd = cov.diagonal().cwiseMax(0.0).cwiseSqrt();
+            modes.frequency_std(i) = sd(0);
+            modes.damping_std(i) = sd(1);
+            modes.mode_shape_std_real.col(i) = sd.segment(2, l);
+            modes.mode_shape_std_imag.col(i) = sd.segment(2 + l, l);
+            const double decay_s = 1.0 / (2.0 * detail::pi * modes.frequency_hz(i) * modes.damping_ratio(i));
+            modes.block_too_short(i) = modes.damping_ratio(i) > 0.0 && block_seconds < 0.5 * decay_s;
+        }
+    }
+
+private:
+    const Realization& re_;
+    Index nb_;
+    Eigen::MatrixXd dsigma_;  ///< d sigma_j per block, j < n_max + 1
+    Eigen::MatrixXd qa_;      ///< Q3 + Q2^T per block: n_max x (n_max n_b)
+    Eigen::MatrixXd qb_;      ///< Q1 + Q1^T per block
+    Eigen::MatrixXd q4_;      ///< dC per block: l x (n_max n_b)
+};
+
+}  // namespace modaluq

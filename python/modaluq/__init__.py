@@ -1,0 +1,1 @@
+"""modaluq: modal parameters with their uncertainty (placeholder during bootstrap)."""

@@ -1,0 +1,277 @@
+"""Delimited text loader (CSV, TSV, semicolon- or whitespace-separated)."""
+
+from __future__ import annotations
+
+import csv as _csv
+import numbers
+import re
+
+import numpy as np
+
+from ._common import check_fs_arg, check_path, fail, fs_from_time, pick_fs
+from .recording import Recording
+
+__all__ = ["read_csv", "TIME_COLUMN_NAMES"]
+
+#: Header names (case-insensitive, unit suffix removed) recognised as the time column.
+TIME_COLUMN_NAMES = ("time", "t", "time_s", "time_sec", "times", "time_ms", "t_s", "t_ms",
+                     "seconds", "timestamp_s")
+
+_CANDIDATES = ("\t", ";", ",", "|")
+_UNIT_RE = re.compile(r"^(.*?)\s*(?:\[([^\]]*)\]|\(([^)]*)\))\s*$")
+_TIME_SCALE = {"s": 1.0, "sec": 1.0, "seconds": 1.0, "ms": 1e-3, "us": 1e-6, "µs": 1e-6}
+_DELIM_NAMES = {"\t": "tab", ";": "semicolon", ",": "comma", "|": "pipe", None: "whitespace"}
+
+
+def _split_header(line: str, delim):
+    if delim is None:
+        out: list[str] = []
+        for tok in line.split():  # "acc1 [m/s^2]" -> one header cell with its unit
+            if out and re.fullmatch(r"\[[^\]]*\]|\([^)]*\)", tok):
+                out[-1] = f"{out[-1]} {tok}"
+            else:
+                out.append(tok.strip('"'))
+        return out
+    return [f.strip() for f in next(_csv.reader([line], delimiter=delim, quotechar='"'))]
+
+
+def _split(line: str, delim):
+    if delim is None:
+        return line.split()
+    return [f.strip().strip('"').strip() for f in line.split(delim)]
+
+
+def _sniff(header: str, sample: list[str], decimal: str):
+    """Choose the delimiter: tab, semicolon, comma, pipe (in this order), else whitespace."""
+    first = sample[0] if sample else header
+    for c in _CANDIDATES:
+        if c == decimal:
+            continue
+        nh = len(_split_header(header, c)) - 1
+        if nh >= 1 and first.count(c) == nh:
+            return c
+    nh = len(_split_header(header, None))
+    if nh > 1 and len(first.split()) == nh:
+        return None
+    for c in _CANDIDATES:  # header and first row disagree: trust the header
+        if c != decimal and c in header:
+            return c
+    return None
+
+
+def _name_unit(field: str) -> tuple[str, str]:
+    m = _UNIT_RE.match(field)
+    if m and m.group(1):
+        unit = m.group(2) if m.group(2) is not None else m.group(3)
+        return m.group(1).strip(), unit.strip()
+    return field.strip(), ""
+
+
+def _cell_error(path, lineno: int, colname: str, cell: str) -> Exception:
+    s = cell.strip()
+    if s == "":
+        problem = "empty cell"
+    elif s.lower() in ("nan", "-nan", "+nan"):
+        problem = f"NaN value ({s!r})"
+    elif s.lower().lstrip("+-") in ("inf", "infinity"):
+        problem = f"infinite value ({s!r})"
+    else:
+        problem = f"cannot parse {s!r} as a number"
+    return fail(path, f"line {lineno}, column {colname!r}: {problem}")
+
+
+def _locate_problem(path, lines, linenos, delim, decimal, colnames):
+    """Slow scan for the first bad line/cell (used only when the fast parser failed)."""
+    n = len(colnames)
+    for line, ln in zip(lines, linenos):
+        fields = _split(line, delim)
+        if len(fields) != n:
+            if len(fields) < n:
+                missing = ", ".join(repr(c) for c in colnames[len(fields):])
+                raise fail(path, f"line {ln}: {len(fields)} fields but the header has {n}; "
+                                 f"missing column(s) {missing} (truncated file?)")
+            raise fail(path, f"line {ln}: {len(fields)} fields but the header has {n} "
+                             f"(delimiter {_DELIM_NAMES.get(delim, repr(delim))})")
+        for f, cname in zip(fields, colnames):
+            s = f.replace(decimal, ".") if decimal != "." else f
+            try:
+                v = float(s)
+            except ValueError:
+                raise _cell_error(path, ln, cname, f) from None
+            if not np.isfinite(v):
+                raise _cell_error(path, ln, cname, f)
+    return None
+
+
+def read_csv(path, *, fs=None, inputs=None, time_column=None, delimiter=None, decimal=".",
+             comment="#", time_tolerance=0.01, encoding=None) -> Recording:
+    """Read a delimited text file whose first (non-comment) row holds the channel names.
+
+    Parameters
+    ----------
+    fs : float, optional
+        Sampling frequency. Required when the file has no time column; when given it takes
+        precedence over the time column (which is still removed from the channels).
+    inputs : list of str/int, optional
+        Known-input channels, by header name or by index among the data columns (the time
+        column excluded).
+    time_column : str, int, False or None
+        None: auto-detect a column named like ``time``, ``t``, ``time_s`` (case-insensitive,
+        unit suffix such as ``[s]`` ignored). A name or a 0-based index among all columns picks it
+        explicitly; False means there is no time column.
+    delimiter : str, optional
+        Field separator; default sniffed among tab, ``;``, ``,``, ``|`` and whitespace.
+    decimal : str
+        Decimal mark, ``'.'`` (default) or ``','`` (then the delimiter cannot be ``,``).
+    comment : str or None
+        Lines starting with this string are ignored (default ``'#'``).
+    time_tolerance : float
+        Allowed deviation of the time stamps from a uniform grid, in sample periods.
+    encoding : str, optional
+        Text encoding; default UTF-8 (with or without BOM), falling back to Latin-1.
+
+    Header cells like ``acc1 [m/s^2]`` or ``acc1 (m/s^2)`` give name ``acc1`` and unit
+    ``m/s^2``. Any empty, NaN or unparsable cell raises ``ValueError`` naming the file, the
+    1-based line number in the file (the header counts) and the column.
+    """
+    p = check_path(path)
+    check_fs_arg(fs)
+    if delimiter is not None and (not isinstance(delimiter, str) or len(delimiter) == 0):
+        raise TypeError(f"delimiter must be a non-empty str or None, got {delimiter!r}")
+    if not isinstance(decimal, str) or decimal not in (".", ","):
+        raise TypeError(f"decimal must be '.' or ',', got {decimal!r}")
+    if delimiter == decimal:
+        raise ValueError("delimiter and decimal cannot both be ','")
+    if comment is not None and (not isinstance(comment, str) or comment == ""):
+        raise TypeError(f"comment must be a non-empty str or None, got {comment!r}")
+    if time_column is not None and time_column is not False and (
+            isinstance(time_column, bool) or not isinstance(time_column, (str, numbers.Integral))):
+        raise TypeError("time_column must be a column name (str), an index (int), False or None, "
+                        f"got {time_column!r}")
+    if isinstance(time_tolerance, bool) or not isinstance(time_tolerance, numbers.Real) or \
+            not time_tolerance > 0:
+        raise TypeError(f"time_tolerance must be a positive number, got {time_tolerance!r}")
+    if encoding is not None and not isinstance(encoding, str):
+        raise TypeError(f"encoding must be a str or None, got {type(encoding).__name__}")
+
+    raw = p.read_bytes()
+    if b"\x00" in raw[:65536]:
+        raise fail(p, "binary content (NUL bytes): not a delimited text file")
+    if encoding is not None:
+        try:
+            text = raw.decode(encoding)
+        except (UnicodeDecodeError, LookupError) as exc:
+            raise fail(p, f"cannot decode as {encoding}: {exc}") from None
+    else:
+        try:
+            text = raw.decode("utf-8-sig")
+        except UnicodeDecodeError:
+            text = raw.decode("latin-1")
+
+    all_lines = text.split("\n")
+    hdr_idx = None
+    data, linenos = [], []
+    for i, line in enumerate(all_lines):
+        line = line.rstrip("\r")
+        s = line.strip()
+        if not s or (comment is not None and s.startswith(comment)):
+            continue
+        if hdr_idx is None:
+            hdr_idx, header = i, line
+        else:
+            data.append(line)
+            linenos.append(i + 1)
+    if hdr_idx is None:
+        raise fail(p, "no header row (the file holds only blank or comment lines)")
+    if not data:
+        raise fail(p, f"no data rows after the header (line {hdr_idx + 1})")
+
+    if delimiter is None:
+        delim = _sniff(header, data[:20], decimal)
+    elif delimiter.isspace() and delimiter != "\t":
+        delim = None  # any run of spaces
+    else:
+        delim = delimiter
+    fields = _split_header(header, delim)
+    # tolerate a trailing delimiter on every line ("a,b,c," / "1,2,3,")
+    if len(fields) > 1 and fields[-1] == "" and delim is not None:
+        fields = fields[:-1]
+        data = [ln[:-len(delim)] if ln.rstrip().endswith(delim) else ln for ln in
+                (d.rstrip() for d in data)]
+    names, units = zip(*(_name_unit(f) for f in fields))
+    names, units = list(names), list(units)
+    for k, nm in enumerate(names):
+        if nm == "":
+            raise fail(p, f"line {hdr_idx + 1}: header cell {k + 1} is empty; every column needs "
+                          "a name")
+
+    def _is_num(s):
+        try:
+            float(s.replace(decimal, "."))
+        except ValueError:
+            return False
+        return True
+
+    if all(_is_num(nm) for nm in names):
+        raise fail(p, f"line {hdr_idx + 1}: the first row is numeric ({header.strip()[:40]!r}); "
+                      "a header row of channel names is required")
+
+    ncol = len(names)
+    # ------------------------------------------------------------ fast numeric parse
+    work = data
+    if decimal == ",":
+        work = [d.replace(",", ".") for d in data]
+    values = None
+    try:
+        values = np.loadtxt(work, delimiter=delim, dtype=np.float64, ndmin=2, quotechar='"',
+                            comments=None)
+    except Exception:  # noqa: BLE001 - fall back to the slow scan that names line/column
+        values = None
+    if values is None or values.shape != (len(data), ncol):
+        _locate_problem(p, data, linenos, delim, decimal, names)
+        raise fail(p, "could not parse the numeric data (inconsistent rows?)")
+    bad = ~np.isfinite(values)
+    if bad.any():
+        r, c = np.argwhere(bad)[0]
+        cell = _split(data[r], delim)[c] if len(_split(data[r], delim)) == ncol else "nan"
+        raise _cell_error(p, linenos[r], names[c], cell)
+
+    # ------------------------------------------------------------ time column
+    tcol = None
+    if time_column is None:
+        for k, nm in enumerate(names):
+            if nm.lower() in TIME_COLUMN_NAMES:
+                tcol = k
+                break
+    elif time_column is not False:
+        if isinstance(time_column, str):
+            matches = [k for k, nm in enumerate(names) if nm == time_column or fields[k] ==
+                       time_column]
+            if not matches:
+                raise fail(p, f"time_column {time_column!r} not found; columns are: "
+                              f"{', '.join(map(repr, names))}")
+            tcol = matches[0]
+        else:
+            k = int(time_column)
+            if not -ncol <= k < ncol:
+                raise ValueError(f"{p}: time_column index {k} out of range for {ncol} columns")
+            tcol = k % ncol
+    if tcol is not None and ncol == 1:
+        raise fail(p, "the only column is the time column; no channels to load")
+
+    fs_file = None
+    if tcol is not None:
+        if fs is None:
+            unit = units[tcol].lower()
+            nm = names[tcol].lower()
+            scale = _TIME_SCALE.get(unit, 1e-3 if nm.endswith("_ms") else 1.0)
+            fs_file = fs_from_time(values[:, tcol] * scale, p, tolerance=float(time_tolerance),
+                                   what=f"time column {names[tcol]!r}")
+        keep = [k for k in range(ncol) if k != tcol]
+        values = values[:, keep]
+        names = [names[k] for k in keep]
+        units = [units[k] for k in keep]
+    fs_v = pick_fs(fs, fs_file, p, "no time column found (looked for "
+                   f"{', '.join(TIME_COLUMN_NAMES[:3])}, ...; or give time_column=)")
+    return Recording.from_arrays(values, fs_v, names=names, units=units, inputs=inputs,
+                                 source=str(p))

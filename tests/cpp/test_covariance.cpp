@@ -1,0 +1,177 @@
+#include <doctest/doctest.h>
+
+#include "support.hpp"
+
+using namespace support;
+using modaluq::CovarianceAccumulator;
+using modaluq::HankelLayout;
+
+namespace {
+
+HankelLayout layout(Index l, Index m, Index p, Index q, std::vector<Index> refs = {}) {
+    HankelLayout L;
+    L.n_outputs = l;
+    L.n_inputs = m;
+    L.block_rows = p;
+    L.past_block_rows = q;
+    L.references = std::move(refs);
+    return L;
+}
+
+void check_against_naive(const modaluq::Covariances& c, const Naive& nv, double tol) {
+    CHECK(rel(c.R1, nv.R1) < tol);
+    if (c.has_inputs()) {
+        CHECK(rel(c.R2, nv.R2) < tol);
+        CHECK(rel(c.R3, nv.R3) < tol);
+        CHECK(rel(c.R4, nv.R4) < tol);
+    }
+    REQUIRE(c.blocks.cols() == static_cast<Index>(nv.b1.size()));
+    for (Index k = 0; k < c.blocks.cols(); ++k) {
+        Eigen::VectorXd expect(c.blocks.rows());
+        Index pos = 0;
+        auto put = [&](const MatrixXd& m) {
+            expect.segment(pos, m.size()) = Eigen::Map<const VectorXd>(m.data(), m.size());
+            pos += m.size();
+        };
+        put(nv.b1[k]);
+        if (c.has_inputs()) { put(nv.b2[k]); put(nv.b3[k]); put(nv.b4[k]); }
+        CHECK(rel(c.blocks.col(k), expect) < tol);
+    }
+}
+
+}  // namespace
+
+TEST_CASE("batch covariances equal the explicit data-matrix definition") {
+    const Sim s = simulate(3, {0, 2}, 1500, 7, true, 0.3, 0.05);
+    SUBCASE("output-only, p != q, references") {
+        const auto L = layout(2, 0, 4, 6, {1});
+        const auto c = modaluq::compute_covariances(s.y, MatrixXd(), L, 7);
+        check_against_naive(c, naive_covariances(s.y, MatrixXd(), L, 7, true), 1e-12);
+    }
+    SUBCASE("input/output, p != q") {
+        const auto L = layout(2, 1, 5, 3);
+        const auto c = modaluq::compute_covariances(s.y, s.u, L, 5);
+        check_against_naive(c, naive_covariances(s.y, s.u, L, 5, true), 1e-12);
+        CHECK(c.n_columns == 1500 - 5 - 3 + 1);
+        CHECK(c.block_length == c.n_columns / 5);
+    }
+    SUBCASE("without mean removal") {
+        MatrixXd y = s.y.array() + 3.0;
+        const auto L = layout(2, 1, 3, 3);
+        const auto c = modaluq::compute_covariances(y, s.u, L, 4, false);
+        check_against_naive(c, naive_covariances(y, s.u, L, 4, false), 1e-12);
+    }
+}
+
+TEST_CASE("any chunking gives the batch result") {
+    const Sim s = simulate(3, {0, 1, 2}, 2300, 11, true, 0.3, 0.05);
+    const auto L = layout(3, 1, 4, 5, {0, 2});
+    const Index N = 2300 - L.max_lag(), Nb = N / 6;
+    CovarianceAccumulator whole(L, Nb);
+    whole.push(s.y, s.u);
+    const auto ref = whole.finish();
+    std::mt19937 rng(3);
+    for (int trial = 0; trial < 12; ++trial) {
+        CovarianceAccumulator acc(L, Nb);
+        Index pos = 0;
+        std::uniform_int_distribution<Index> len(0, trial < 6 ? 9 : 400);
+        while (pos < s.y.cols()) {
+            const Index n = std::min<Index>(len(rng), s.y.cols() - pos);
+            acc.push(s.y.middleCols(pos, n), s.u.middleCols(pos, n));
+            pos += n;
+        }
+        const auto c = acc.finish();
+        CHECK(rel(c.R1, ref.R1) < 1e-12);
+        CHECK(rel(c.R3, ref.R3) < 1e-12);
+        CHECK(rel(c.blocks, ref.blocks) < 1e-12);
+    }
+}
+
+TEST_CASE("a large DC offset changes nothing") {
+    const Sim s = simulate(2, {0, 1}, 3000, 5, true, 0.3, 0.05);
+    const auto L = layout(2, 1, 4, 4);
+    const auto c0 = modaluq::compute_covariances(s.y, s.u, L, 10);
+    const double sd = std::sqrt((s.y.array().colwise() - s.y.rowwise().mean().array()).square().mean());
+    const MatrixXd y = s.y.array() + 1e4 * sd;
+    const MatrixXd u = s.u.array() - 1e4;
+    // Also chunked, so that the shift comes from the first chunk only.
+    CovarianceAccumulator acc(L, c0.block_length);
+    for (Index pos = 0; pos < y.cols(); pos += 777) {
+        const Index n = std::min<Index>(777, y.cols() - pos);
+        acc.push(y.middleCols(pos, n), u.middleCols(pos, n));
+    }
+    const auto c1 = acc.finish();
+    CHECK(rel(c1.R1, c0.R1) < 1e-9);
+    CHECK(rel(c1.R2, c0.R2) < 1e-9);
+    CHECK(rel(c1.R3, c0.R3) < 1e-9);
+    CHECK(rel(c1.blocks, c0.blocks) < 1e-9);
+    CHECK(std::abs(c1.channel_mean(0) - (c0.channel_mean(0) + 1e4 * sd)) < 1e-9 * 1e4 * sd);
+}
+
+TEST_CASE("accumulators over consecutive spans merge into the whole") {
+    const Sim s = simulate(3, {0, 2}, 2000, 13, true, 0.3, 0.05);
+    const auto L = layout(2, 1, 3, 4);
+    const Index Nb = (2000 - L.max_lag()) / 8;
+    CovarianceAccumulator whole(L, Nb);
+    whole.push(s.y, s.u);
+    const auto ref = whole.finish();
+    for (Index split : {Index(1), Index(4), Index(250), Index(Nb), Index(3 * Nb + 5), Index(1996), Index(1999)}) {
+        CAPTURE(split);
+        CovarianceAccumulator a(L, Nb), b(L, Nb, true, split);
+        a.push(s.y.leftCols(split), s.u.leftCols(split));
+        b.push(s.y.middleCols(split, 2000 - split), s.u.middleCols(split, 2000 - split));
+        a.merge(b);
+        const auto c = a.finish();
+        CHECK(rel(c.R1, ref.R1) < 1e-12);
+        CHECK(rel(c.R2, ref.R2) < 1e-12);
+        CHECK(rel(c.blocks, ref.blocks) < 1e-12);
+    }
+    SUBCASE("three spans, merged left to right") {
+        CovarianceAccumulator a(L, Nb), b(L, Nb, true, 700), c(L, Nb, true, 703);
+        a.push(s.y.leftCols(700), s.u.leftCols(700));
+        b.push(s.y.middleCols(700, 3), s.u.middleCols(700, 3));
+        c.push(s.y.rightCols(1297), s.u.rightCols(1297));
+        a.merge(b);
+        a.merge(c);
+        CHECK(rel(a.finish().blocks, ref.blocks) < 1e-12);
+    }
+}
+
+TEST_CASE("memory does not grow with the samples of a block") {
+    // The state is per block, not per sample: pushing 10x more samples into the same number of
+    // blocks leaves the result's size unchanged.
+    const auto L = layout(2, 0, 3, 3);
+    const Sim s = simulate(2, {0, 1}, 20000, 2, false, 1.0, 0.0);
+    const auto small = modaluq::compute_covariances(s.y.leftCols(2000), MatrixXd(), L, 5);
+    const auto large = modaluq::compute_covariances(s.y, MatrixXd(), L, 5);
+    CHECK(small.blocks.size() == large.blocks.size());
+}
+
+TEST_CASE("covariance errors name the argument") {
+    const auto L = layout(2, 1, 3, 3);
+    CHECK_THROWS_AS(CovarianceAccumulator(L, 5), modaluq::invalid_argument);  // block_length < p + q
+    CHECK_THROWS_WITH_AS(CovarianceAccumulator(layout(2, 0, 1, 3), 50), doctest::Contains("block_rows"),
+                         modaluq::invalid_argument);
+    CHECK_THROWS_WITH_AS(CovarianceAccumulator(layout(2, 0, 3, 3, {2}), 50), doctest::Contains("references"),
+                         modaluq::invalid_argument);
+    CovarianceAccumulator acc(L, 50);
+    CHECK_THROWS_WITH_AS(acc.push(MatrixXd::Zero(3, 10), MatrixXd::Zero(1, 10)), doctest::Contains("y must have 2"),
+                         modaluq::invalid_argument);
+    CHECK_THROWS_WITH_AS(acc.push(MatrixXd::Zero(2, 10), MatrixXd::Zero(1, 9)), doctest::Contains("u must have as many"),
+                         modaluq::invalid_argument);
+    MatrixXd bad = MatrixXd::Zero(2, 10);
+    bad(1, 6) = std::numeric_limits<double>::quiet_NaN();
+    CHECK_THROWS_WITH_AS(acc.push(bad, MatrixXd::Zero(1, 10)), doctest::Contains("sample 6, channel 1 is NaN"),
+                         modaluq::invalid_argument);
+    MatrixXd inf = MatrixXd::Zero(1, 10);
+    inf(0, 2) = std::numeric_limits<double>::infinity();
+    CHECK_THROWS_WITH_AS(acc.push(MatrixXd::Zero(2, 10), inf), doctest::Contains("u: sample 2"), modaluq::invalid_argument);
+    CHECK(acc.n_samples() == 0);  // nothing half-applied
+    acc.push(MatrixXd::Random(2, 8), MatrixXd::Random(1, 8));
+    CHECK_THROWS_WITH_AS(acc.finish(), doctest::Contains("record too short"), modaluq::invalid_argument);
+    CovarianceAccumulator wrong(L, 50, true, 7);
+    CHECK_THROWS_WITH_AS(acc.merge(wrong), doctest::Contains("must start at sample 8"), modaluq::invalid_argument);
+    CHECK_THROWS_WITH_AS(wrong.finish(), doctest::Contains("starts at sample 7"), modaluq::invalid_argument);
+    CHECK_THROWS_WITH_AS(modaluq::compute_covariances(MatrixXd::Random(2, 100), MatrixXd(), layout(2, 0, 3, 3), 50),
+                         doctest::Contains("at least 305 samples"), modaluq::invalid_argument);
+}

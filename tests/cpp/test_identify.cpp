@@ -1,0 +1,130 @@
+#include <doctest/doctest.h>
+
+#include "support.hpp"
+
+using namespace support;
+
+namespace {
+
+modaluq::IdentifyOptions options(double fs, Index p, Index q, std::vector<Index> orders, bool unc = false,
+                                 Index nb = 10) {
+    modaluq::IdentifyOptions o;
+    o.fs = fs;
+    o.block_rows = p;
+    o.past_block_rows = q;
+    o.orders = std::move(orders);
+    o.uncertainty = unc;
+    o.n_blocks = nb;
+    return o;
+}
+
+}  // namespace
+
+TEST_CASE("noise-free 2-DOF systems are identified exactly") {
+    SUBCASE("input/output, white input, no unknown input or noise") {
+        const Sim s = simulate(2, {0, 1}, 4000, 3, true, 0.0, 0.0);
+        auto o = options(s.fs, 4, 4, {4});
+        o.demean = false;
+        const auto id = modaluq::identify(s.y, s.u, o);
+        const auto& m = id.at_order(4);
+        REQUIRE(m.n_modes() == 2);
+        for (Index i = 0; i < 2; ++i) {
+            CHECK(std::abs(m.frequency_hz(i) / s.f_true(i) - 1) < 1e-6);
+            CHECK(std::abs(m.damping_ratio(i) - 0.02) < 1e-6);
+        }
+    }
+    SUBCASE("output-only free decay") {
+        const Sim s = simulate(2, {0, 1}, 600, 9, false, 0.0, 0.0, 20.0, /*free_decay=*/true, 1.0, 0.01);
+        auto o = options(s.fs, 3, 3, {4});
+        o.demean = false;
+        const auto id = modaluq::identify(s.y, MatrixXd(), o);
+        const auto& m = id.at_order(4);
+        REQUIRE(m.n_modes() == 2);
+        for (Index i = 0; i < 2; ++i) {
+            CHECK(std::abs(m.frequency_hz(i) / s.f_true(i) - 1) < 1e-6);
+            CHECK(std::abs(m.damping_ratio(i) - 0.01) < 1e-6);
+        }
+        // Normalised mode shapes: largest component exactly 1.
+        for (Index i = 0; i < 2; ++i) CHECK(m.mode_shape(m.reference_component(i), i) == std::complex<double>(1.0, 0.0));
+    }
+}
+
+TEST_CASE("all orders come from one SVD and match separate runs") {
+    const Sim s = simulate(3, {0, 1, 2}, 6000, 21, true, 0.2, 0.05);
+    const auto multi = modaluq::identify(s.y, s.u, options(s.fs, 5, 6, {2, 4, 6, 8, 10}, true));
+    REQUIRE(multi.modes.size() == 5);
+    for (Index n : {4, 6, 10}) {
+        const auto single = modaluq::identify(s.y, s.u, options(s.fs, 5, 6, {n}, true));
+        const auto& a = multi.at_order(n);
+        const auto& b = single.at_order(n);
+        REQUIRE(a.n_modes() == b.n_modes());
+        CHECK(rel(a.frequency_hz, b.frequency_hz) < 1e-12);
+        CHECK(rel(a.frequency_std, b.frequency_std) < 1e-9);
+    }
+    // sorted by frequency, one per conjugate pair
+    const auto& m = multi.at_order(6);
+    for (Index i = 1; i < m.n_modes(); ++i) CHECK(m.frequency_hz(i) >= m.frequency_hz(i - 1));
+    for (Index i = 0; i < m.n_modes(); ++i) CHECK(m.eigenvalue(i).imag() > 0);
+}
+
+TEST_CASE("identification from an accumulator fed in chunks equals the batch call") {
+    const Sim s = simulate(3, {0, 2}, 5000, 4, true, 0.3, 0.05);
+    auto o = options(s.fs, 5, 5, {6}, true, 20);
+    const auto batch = modaluq::identify(s.y, s.u, o);
+    modaluq::CovarianceAccumulator acc(o.layout(2, 1), batch.block_length);
+    for (Index pos = 0; pos < 5000; pos += 333) {
+        const Index n = std::min<Index>(333, 5000 - pos);
+        acc.push(s.y.middleCols(pos, n), s.u.middleCols(pos, n));
+    }
+    const auto streamed = modaluq::identify(acc.finish(), o);
+    CHECK(rel(streamed.at_order(6).frequency_hz, batch.at_order(6).frequency_hz) < 1e-10);
+    CHECK(rel(streamed.at_order(6).damping_std, batch.at_order(6).damping_std) < 1e-8);
+}
+
+TEST_CASE("a rank-deficient input covariance is reported, not silently used") {
+    const Sim s = simulate(2, {0, 1}, 3000, 8, true, 0.3, 0.05);
+    MatrixXd u2(2, s.u.cols());
+    u2 << s.u, s.u;  // duplicated input channel
+    const auto id = modaluq::identify(s.y, u2, options(s.fs, 4, 4, {4}));
+    CHECK(id.input_rank_deficient);
+    CHECK(id.input_rank == 4);
+    CHECK_FALSE(id.warnings.empty());
+    MatrixXd uc = MatrixXd::Constant(1, s.u.cols(), 2.5);  // constant input: zero after demeaning
+    const auto id2 = modaluq::identify(s.y, uc, options(s.fs, 4, 4, {4}));
+    CHECK(id2.input_rank_deficient);
+    CHECK(id2.input_rank == 0);
+    const auto ok = modaluq::identify(s.y, s.u, options(s.fs, 4, 4, {4}));
+    CHECK_FALSE(ok.input_rank_deficient);
+    CHECK(ok.input_condition < 2.0);
+}
+
+TEST_CASE("identify errors name the argument and the rule") {
+    const Sim s = simulate(2, {0, 1}, 2000, 1, true, 0.3, 0.05);
+    using modaluq::invalid_argument;
+    CHECK_THROWS_WITH_AS(modaluq::identify(s.y, s.u, options(0.0, 4, 4, {4})), doctest::Contains("fs"), invalid_argument);
+    CHECK_THROWS_WITH_AS(modaluq::identify(s.y, s.u, options(std::nan(""), 4, 4, {4})), doctest::Contains("fs"),
+                         invalid_argument);
+    CHECK_THROWS_WITH_AS(modaluq::identify(s.y, s.u, options(20, 1, 4, {4})), doctest::Contains("block_rows must be >= 2"),
+                         invalid_argument);
+    CHECK_THROWS_WITH_AS(modaluq::identify(s.y, s.u, options(20, 4, 4, {7})),
+                         doctest::Contains("min((block_rows - 1) * n_outputs, past_block_rows * n_references) = 6"),
+                         invalid_argument);
+    CHECK_THROWS_WITH_AS(modaluq::identify(s.y, s.u, options(20, 4, 4, {4}, true, 1)), doctest::Contains("n_blocks must be >= 2"),
+                         invalid_argument);
+    CHECK_THROWS_WITH_AS(modaluq::identify(s.y, s.u, options(20, 4, 4, {0})), doctest::Contains("orders must be >= 1"),
+                         invalid_argument);
+    CHECK_THROWS_WITH_AS(modaluq::identify(s.y, s.u, options(20, 4, 4, {})), doctest::Contains("orders"), invalid_argument);
+    CHECK_THROWS_WITH_AS(modaluq::identify(s.y, s.u.leftCols(1999), options(20, 4, 4, {4})),
+                         doctest::Contains("u must have as many samples"), invalid_argument);
+    CHECK_THROWS_WITH_AS(modaluq::identify(s.y.leftCols(100), s.u.leftCols(100), options(20, 4, 4, {4}, true, 50)),
+                         doctest::Contains("record too short"), invalid_argument);
+    auto o = options(20, 4, 4, {4});
+    o.references = {0, 5};
+    CHECK_THROWS_WITH_AS(modaluq::identify(s.y, s.u, o), doctest::Contains("references: index 5"), invalid_argument);
+    MatrixXd y = s.y;
+    y(0, 17) = std::numeric_limits<double>::infinity();
+    CHECK_THROWS_WITH_AS(modaluq::identify(y, s.u, options(20, 4, 4, {4})), doctest::Contains("y: sample 17, channel 0"),
+                         invalid_argument);
+    const auto id = modaluq::identify(s.y, s.u, options(20, 4, 4, {4}));
+    CHECK_THROWS_WITH_AS(id.at_order(6), doctest::Contains("order 6 was not identified"), invalid_argument);
+}

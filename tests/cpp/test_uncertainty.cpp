@@ -1,0 +1,281 @@
+#include <doctest/doctest.h>
+
+#include "support.hpp"
+
+using namespace support;
+
+namespace {
+
+struct Case {
+    Sim s;
+    modaluq::IdentifyOptions o;
+    modaluq::Covariances cov;
+};
+
+// 3-DOF chain, 2 outputs, p != q; the known input has std 10 so that the R3+ dR3 R3+ term of
+// dH matters (uq-math §4.1).
+Case make_case(bool io, Index n = 6) {
+    Case c;
+    c.s = simulate(3, {0, 2}, 6000, 17, io, io ? 1.0 : 1.0, 0.05, 20.0, false, 10.0);
+    c.o.fs = c.s.fs;
+    c.o.block_rows = 4;
+    c.o.past_block_rows = 5;
+    c.o.orders = {n};
+    c.o.n_blocks = 20;
+    c.cov = modaluq::compute_covariances(c.s.y, io ? c.s.u : MatrixXd(), c.o.layout(2, io ? 1 : 0), c.o.n_blocks);
+    return c;
+}
+
+modaluq::Covariances perturb(const modaluq::Covariances& c, const VectorXd& d, double h) {
+    modaluq::Covariances p = c;
+    Index pos = 0;
+    for (MatrixXd* m : {&p.R1, &p.R2, &p.R3, &p.R4}) {
+        if (m->size() == 0) continue;
+        *m += h * Eigen::Map<const MatrixXd>(d.data() + pos, m->rows(), m->cols());
+        pos += m->size();
+    }
+    return p;
+}
+
+// Step for central differences: 1e-6 relative to the unperturbed quantity.
+double step(const VectorXd& x, const VectorXd& d) { return 1e-6 * x.norm() / d.norm(); }
+
+VectorXd stack_r(const modaluq::Covariances& c) {
+    VectorXd r(c.layout.n_covariance_entries());
+    Index pos = 0;
+    for (const MatrixXd* m : {&c.R1, &c.R2, &c.R3, &c.R4}) {
+        r.segment(pos, m->size()) = Eigen::Map<const VectorXd>(m->data(), m->size());
+        pos += m->size();
+    }
+    return r;
+}
+
+// theta = [f, xi, Re shape, Im shape] of mode i, normalised at component k.
+VectorXd theta(const modaluq::Modes& m, Index i, Index k) {
+    const Index l = m.mode_shape.rows();
+    VectorXd t(2 + 2 * l);
+    const Eigen::VectorXcd sh = m.mode_shape.col(i) / m.mode_shape(k, i);
+    t << m.frequency_hz(i), m.damping_ratio(i), sh.real(), sh.imag();
+    return t;
+}
+
+Index nearest(const modaluq::Modes& m, double f) {
+    Index i;
+    (m.frequency_hz.array() - f).abs().minCoeff(&i);
+    return i;
+}
+
+}  // namespace
+
+TEST_CASE("stage J_{H,R}: matrix-free T_H equals finite differences and the Kronecker form") {
+    for (bool io : {false, true}) {
+        CAPTURE(io);
+        const Case c = make_case(io);
+        const auto sub = modaluq::subspace_matrix(c.cov);
+        const MatrixXd TR = c.cov.covariance_factor();
+        const MatrixXd TH = modaluq::propagate_to_subspace(sub, c.cov, TR);
+        const MatrixXd J = jacobian_H_R(c.cov, sub);
+        CHECK(rel(TH, J * TR) < 1e-12);
+        for (Index k : {0, 7, 19}) {
+            const VectorXd d = TR.col(k);
+            const double h = step(stack_r(c.cov), d);
+            const MatrixXd Hp = modaluq::subspace_matrix(perturb(c.cov, d, h)).H;
+            const MatrixXd Hm = modaluq::subspace_matrix(perturb(c.cov, d, -h)).H;
+            const MatrixXd fd = (Hp - Hm) / (2 * h);
+            CHECK(rel(Eigen::Map<const MatrixXd>(TH.col(k).data(), fd.rows(), fd.cols()), fd) < 1e-6);
+        }
+    }
+}
+
+TEST_CASE("stage dGamma: SVD-basis solve equals B_j^+ C_j and finite differences") {
+    for (bool io : {false, true}) {
+        CAPTURE(io);
+        const Case c = make_case(io);
+        const Index n = 6;
+        const auto sub = modaluq::subspace_matrix(c.cov);
+        const modaluq::Realization re(sub.H, 2, n);
+        const MatrixXd TH = modaluq::propagate_to_subspace(sub, c.cov, c.cov.covariance_factor());
+        const MatrixXd JG = jacobian_Gamma_H(re, sub.H, n);
+        for (Index k : {0, 11}) {
+            const Eigen::Map<const MatrixXd> dH(TH.col(k).data(), sub.H.rows(), sub.H.cols());
+            const MatrixXd dg = modaluq::detail::gamma_perturbation(re, dH, n);
+            const VectorXd explicit_dg = JG * TH.col(k);
+            CHECK(rel(Eigen::Map<const VectorXd>(dg.data(), dg.size()), explicit_dg) < 1e-9);
+            const double h = 1e-6 * sub.H.norm() / dH.norm();
+            const MatrixXd Gp = modaluq::Realization(sub.H + h * dH, 2, n).observability();
+            const MatrixXd Gm = modaluq::Realization(sub.H - h * dH, 2, n).observability();
+            CHECK(rel(dg, (Gp - Gm) / (2 * h)) < 1e-6);
+        }
+    }
+}
+
+TEST_CASE("stage dA, dC: explicit J_{A,Gamma} (with the residual term) equals finite differences") {
+    const Case c = make_case(false);
+    const Index n = 6, l = 2;
+    const auto sub = modaluq::subspace_matrix(c.cov);
+    const modaluq::Realization re(sub.H, l, n);
+    const MatrixXd G = re.observability();
+    const MatrixXd J = jacobian_AC_Gamma(G, l);
+    auto ac = [&](const MatrixXd& g) {
+        const Index a = g.rows();
+        MatrixXd A = g.topRows(a - l).colPivHouseholderQr().solve(g.bottomRows(a - l));
+        VectorXd v(n * n + l * n);
+        v << Eigen::Map<const VectorXd>(A.data(), n * n), Eigen::Map<const VectorXd>(g.data(), g.size()).head(0),
+            VectorXd::Zero(0);
+        MatrixXd C = g.topRows(l);
+        v.tail(l * n) = Eigen::Map<const VectorXd>(C.data(), l * n);
+        return v;
+    };
+    std::mt19937_64 rng(5);
+    std::normal_distribution<double> g01;
+    MatrixXd dG(G.rows(), G.cols());
+    for (Index i = 0; i < dG.size(); ++i) dG(i) = g01(rng);
+    const double h = 1e-6 * G.norm() / dG.norm();
+    const VectorXd fd = (ac(G + h * dG) - ac(G - h * dG)) / (2 * h);
+    CHECK(rel(J * Eigen::Map<const VectorXd>(dG.data(), dG.size()), fd) < 1e-6);
+    // The production A (QR at the largest order) equals the least-squares solution.
+    CHECK(rel(re.system(n).A, G.topRows(G.rows() - l).colPivHouseholderQr().solve(G.bottomRows(G.rows() - l))) < 1e-10);
+}
+
+TEST_CASE("stage d lambda, d shape: Q-matrix path equals finite differences of the eigenstructure") {
+    for (bool io : {false, true}) {
+        CAPTURE(io);
+        const Case c = make_case(io);
+        const Index n = 6, l = 2;
+        const auto sub = modaluq::subspace_matrix(c.cov);
+        const modaluq::Realization re(sub.H, l, n);
+        const MatrixXd G = re.observability();
+        std::mt19937_64 rng(9);
+        std::normal_distribution<double> g01;
+        MatrixXd dG(G.rows(), n);
+        for (Index i = 0; i < dG.size(); ++i) dG(i) = g01(rng);
+        MatrixXd qa(n, n), qb(n, n), q4(l, n);
+        modaluq::detail::q_matrices(G, dG, l, qa, qb, q4);
+        const modaluq::StateSpace ss = re.system(n);
+        modaluq::detail::Eigenstructure eig;
+        const modaluq::Modes m = modaluq::modes_from_system(ss, c.o.fs, &eig);
+        const modaluq::detail::OrderContext ctx(eig, ss, re);
+        Eigen::VectorXcd dl(m.n_modes());
+        MatrixXcd ds(l, m.n_modes());
+        modaluq::detail::eigen_perturbation(ctx, qa, qb, q4, dl, ds);
+
+        const double h = 1e-6 * G.norm() / dG.norm();
+        auto modes_at = [&](const MatrixXd& g) {
+            const Index a = g.rows();
+            modaluq::StateSpace s2;
+            s2.A = g.topRows(a - l).colPivHouseholderQr().solve(g.bottomRows(a - l));
+            s2.C = g.topRows(l);
+            return modaluq::modes_from_system(s2, c.o.fs);
+        };
+        const modaluq::Modes mp = modes_at(G + h * dG), mm = modes_at(G - h * dG);
+        for (Index i = 0; i < m.n_modes(); ++i) {
+            const Index ip = nearest(mp, m.frequency_hz(i)), im = nearest(mm, m.frequency_hz(i));
+            const cd fd_l = (mp.eigenvalue(ip) - mm.eigenvalue(im)) / (2 * h);
+            CHECK(std::abs(dl(i) - fd_l) < 1e-6 * std::abs(fd_l) + 1e-12);
+            const Index k = m.reference_component(i);
+            const Eigen::VectorXcd raw = ss.C * ctx.phi.col(i);
+            const Eigen::VectorXcd an = (ds.col(i) - raw / raw(k) * ds(k, i)) / raw(k);
+            const Eigen::VectorXcd fd_s =
+                (mp.mode_shape.col(ip) / mp.mode_shape(k, ip) - mm.mode_shape.col(im) / mm.mode_shape(k, im)) / (2 * h);
+            CHECK((an - fd_s).norm() < 1e-5 * fd_s.norm() + 1e-12);
+        }
+    }
+}
+
+TEST_CASE("stage f, xi, normalised shape: modal_perturbation equals finite differences") {
+    const double fs = 50.0;
+    const cd lambda = std::exp(cd(-0.02 * 2 * modaluq::detail::pi * 5.0, 2 * modaluq::detail::pi * 5.0) / fs);
+    Eigen::VectorXcd raw(3);
+    raw << cd(0.3, 0.1), cd(-1.2, 0.05), cd(0.7, -0.2);
+    Eigen::RowVectorXcd dl(2);
+    dl << cd(0.3, -0.7), cd(-0.2, 0.4);
+    MatrixXcd ds(3, 2);
+    ds << cd(1, 2), cd(0, 1), cd(-1, 0.5), cd(2, -1), cd(0.3, 0.3), cd(-0.5, 1);
+    const MatrixXd ut = modaluq::detail::modal_perturbation(lambda, fs, raw, 1, dl, ds);
+    auto th = [&](cd lam, const Eigen::VectorXcd& r) {
+        const cd mu = std::log(lam) * fs;
+        VectorXd t(8);
+        const Eigen::VectorXcd sh = r / r(1);
+        t << std::abs(mu) / (2 * modaluq::detail::pi), -mu.real() / std::abs(mu), sh.real(), sh.imag();
+        return t;
+    };
+    for (Index k = 0; k < 2; ++k) {
+        const double h = 1e-7;
+        const VectorXd fd = (th(lambda + h * dl(k), raw + h * ds.col(k)) - th(lambda - h * dl(k), raw - h * ds.col(k))) / (2 * h);
+        CHECK(rel(ut.col(k), fd) < 1e-6);
+    }
+}
+
+TEST_CASE("end to end: the efficient multi-order path equals the explicit full path and finite differences") {
+    for (bool io : {false, true}) {
+        CAPTURE(io);
+        Case c = make_case(io);
+        c.o.orders = {2, 4, 6};
+        const auto id = modaluq::identify(c.cov, c.o);
+        for (Index n : {4, 6}) {
+            CAPTURE(n);
+            const auto& m = id.at_order(n);
+            const auto covs = explicit_covariances(c.cov, c.o.fs, n);
+            REQUIRE(static_cast<Index>(covs.size()) == m.n_modes());
+            const Index np = 2 + 2 * 2;
+            for (Index i = 0; i < m.n_modes(); ++i) {
+                const MatrixXd prod = Eigen::Map<const MatrixXd>(m.covariance.col(i).data(), np, np);
+                CHECK(rel(prod, covs[i]) < 1e-10);
+            }
+        }
+        // Finite differences of the whole pipeline along each block direction.
+        const MatrixXd TR = c.cov.covariance_factor();
+        auto o = c.o;
+        o.uncertainty = false;
+        o.orders = {6};
+        const auto& m = id.at_order(6);
+        for (Index i = 0; i < m.n_modes(); ++i) {
+            const Index k = m.reference_component(i);
+            MatrixXd U(6, TR.cols());
+            for (Index b = 0; b < TR.cols(); ++b) {
+                const double h = step(stack_r(c.cov), TR.col(b));
+                const auto mp = modaluq::identify(perturb(c.cov, TR.col(b), h), o).at_order(6);
+                const auto mm = modaluq::identify(perturb(c.cov, TR.col(b), -h), o).at_order(6);
+                U.col(b) = (theta(mp, nearest(mp, m.frequency_hz(i)), k) - theta(mm, nearest(mm, m.frequency_hz(i)), k)) / (2 * h);
+            }
+            const MatrixXd fd = U * U.transpose();
+            const MatrixXd an = Eigen::Map<const MatrixXd>(m.covariance.col(i).data(), 6, 6);
+            CAPTURE(i);
+            CHECK(rel(an, fd) < 1e-5);
+            CHECK(std::abs(std::sqrt(fd(0, 0)) / m.frequency_std(i) - 1) < 1e-6);
+        }
+    }
+}
+
+TEST_CASE("standard deviations do not depend on the units of u or y") {
+    for (bool io : {false, true}) {
+        CAPTURE(io);
+        const Case c = make_case(io);
+        auto ident = [&](const MatrixXd& y, const MatrixXd& u) {
+            return modaluq::identify(y, io ? u : MatrixXd(), c.o).at_order(6);
+        };
+        const auto base = ident(c.s.y, c.s.u);
+        const auto u10 = ident(c.s.y, 10.0 * c.s.u);
+        const auto y10 = ident(10.0 * c.s.y, c.s.u);
+        CHECK(rel(u10.frequency_std, base.frequency_std) < 1e-8);
+        CHECK(rel(u10.damping_std, base.damping_std) < 1e-8);
+        CHECK(rel(y10.frequency_std, base.frequency_std) < 1e-8);
+        CHECK(rel(y10.damping_std, base.damping_std) < 1e-8);
+        CHECK(rel(y10.mode_shape_std_real, base.mode_shape_std_real) < 1e-8);
+    }
+}
+
+TEST_CASE("uncertainty flags") {
+    const Case c = make_case(true);
+    auto o = c.o;
+    o.n_blocks = 4;  // fewer than 2 + 2l + 1
+    o.orders = {5, 6};
+    const auto id = modaluq::identify(c.s.y, c.s.u, o);
+    CHECK(id.too_few_blocks);
+    CHECK(id.at_order(6).singular_value_gap > 0);
+    CHECK_FALSE(id.at_order(6).close_singular_values);  // the true order has a clear gap
+    CHECK(id.at_order(5).close_singular_values);        // order 5 cuts a pair
+    const auto quiet = modaluq::identify(c.s.y, c.s.u, [&] { auto q = o; q.uncertainty = false; return q; }());
+    CHECK(quiet.at_order(6).frequency_std.size() == 0);
+    CHECK(quiet.n_blocks == 0);
+}
