@@ -1,0 +1,63 @@
+// Bindings of modal.hpp and identify.hpp.
+#include <pybind11/eigen.h>
+#include <pybind11/pybind11.h>
+#include <pybind11/stl.h>
+
+#include <modaluq/identify.hpp>
+
+#include "bindings.hpp"
+
+namespace py = pybind11;
+using ConstRef = Eigen::Ref<const Eigen::MatrixXd>;
+
+void modaluq::python::bind_identify(py::module_& m) {
+    py::class_<Modes>(m, "Modes")
+        .def_readonly("order", &Modes::order)
+        .def_readonly("eigenvalue", &Modes::eigenvalue)
+        .def_readonly("frequency_hz", &Modes::frequency_hz)
+        .def_readonly("damping_ratio", &Modes::damping_ratio)
+        .def_readonly("mode_shape", &Modes::mode_shape)
+        .def_readonly("reference_component", &Modes::reference_component)
+        .def_readonly("frequency_std", &Modes::frequency_std)
+        .def_readonly("damping_std", &Modes::damping_std)
+        .def_readonly("mode_shape_std_real", &Modes::mode_shape_std_real)
+        .def_readonly("mode_shape_std_imag", &Modes::mode_shape_std_imag)
+        .def_readonly("covariance", &Modes::covariance)
+        .def_readonly("block_too_short", &Modes::block_too_short)
+        .def_readonly("singular_value_gap", &Modes::singular_value_gap)
+        .def_readonly("close_singular_values", &Modes::close_singular_values);
+
+    py::class_<IdentifyOptions>(m, "IdentifyOptions")
+        .def(py::init<>())
+        .def_readwrite("fs", &IdentifyOptions::fs)
+        .def_readwrite("block_rows", &IdentifyOptions::block_rows)
+        .def_readwrite("past_block_rows", &IdentifyOptions::past_block_rows)
+        .def_readwrite("orders", &IdentifyOptions::orders)
+        .def_readwrite("n_blocks", &IdentifyOptions::n_blocks)
+        .def_readwrite("references", &IdentifyOptions::references)
+        .def_readwrite("uncertainty", &IdentifyOptions::uncertainty)
+        .def_readwrite("demean", &IdentifyOptions::demean)
+        .def_readwrite("input_rcond", &IdentifyOptions::input_rcond)
+        .def("validate", &IdentifyOptions::validate)
+        .def("layout", &IdentifyOptions::layout, py::arg("n_outputs"), py::arg("n_inputs"));
+
+    py::class_<Identification>(m, "Identification")
+        .def_readonly("modes", &Identification::modes)
+        .def_readonly("singular_values", &Identification::singular_values)
+        .def_readonly("n_samples", &Identification::n_samples)
+        .def_readonly("n_columns", &Identification::n_columns)
+        .def_readonly("block_length", &Identification::block_length)
+        .def_readonly("n_blocks", &Identification::n_blocks)
+        .def_readonly("channel_mean", &Identification::channel_mean)
+        .def_readonly("input_rank", &Identification::input_rank)
+        .def_readonly("input_condition", &Identification::input_condition)
+        .def_readonly("input_rank_deficient", &Identification::input_rank_deficient)
+        .def_readonly("too_few_blocks", &Identification::too_few_blocks)
+        .def_readonly("warnings", &Identification::warnings);
+
+    m.def("identify", py::overload_cast<const ConstRef&, const ConstRef&, IdentifyOptions>(&identify),
+          py::arg("y_t").noconvert(), py::arg("u_t").noconvert(), py::arg("options"),
+          py::call_guard<py::gil_scoped_release>());
+    m.def("identify_covariances", py::overload_cast<const Covariances&, IdentifyOptions>(&identify),
+          py::arg("covariances"), py::arg("options"), py::call_guard<py::gil_scoped_release>());
+}

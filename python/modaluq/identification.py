@@ -1,0 +1,376 @@
+"""Identification: ``modaluq.identify`` and the result objects it returns.
+
+The arithmetic runs once, in the C++ core (``modaluq._core``); this module converts the
+user's arrays (``(n_samples, n_channels)``, the shape CSV files, pandas and the OMA packages
+use), names the argument at fault when something is wrong, and wraps the core's result in
+plain frozen dataclasses that print, convert to pandas and plot.
+"""
+
+from __future__ import annotations
+
+import numbers
+import warnings
+from dataclasses import dataclass, field
+from typing import Iterable, Sequence
+
+import numpy as np
+
+from . import _core
+
+__all__ = ["Modes", "Result", "ModalUQWarning", "identify", "as_samples", "core_options"]
+
+
+class ModalUQWarning(UserWarning):
+    """A result is computed but a quality flag is set (see ``Result.warnings``)."""
+
+
+# --------------------------------------------------------------------------- argument checks
+
+
+def as_samples(x, name: str, *, allow_none: bool = False):
+    """Return ``x`` as a C-contiguous float64 ``(n_samples, n_channels)`` array.
+
+    A 1-D array is one channel. Complex or non-numeric data raise ``TypeError``; arrays with
+    more than two dimensions raise ``ValueError``; both name the argument. No copy is made when
+    ``x`` already is a C-contiguous float64 array.
+    """
+    if x is None:
+        if allow_none:
+            return None
+        raise TypeError(f"{name} must be an array of samples, got None")
+    arr = np.asarray(x)
+    if np.iscomplexobj(arr):
+        raise TypeError(f"{name} must be real; got complex data (dtype {arr.dtype})")
+    if arr.dtype.kind not in "biuf":
+        raise TypeError(f"{name} must hold real numbers; got dtype {arr.dtype}")
+    if arr.ndim == 1:
+        arr = arr[:, None]
+    elif arr.ndim != 2:
+        raise ValueError(f"{name} must have shape (n_samples, n_channels) or (n_samples,); got shape {arr.shape}")
+    if arr.shape[1] == 0:
+        raise ValueError(f"{name} must have at least one channel; got shape {arr.shape}")
+    return np.ascontiguousarray(arr, dtype=np.float64)
+
+
+def _integer(name, value, *, minimum=None):
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Integral):
+        raise TypeError(f"{name} must be an integer; got {value!r}")
+    value = int(value)
+    if minimum is not None and value < minimum:
+        raise ValueError(f"{name} must be >= {minimum}; got {value}")
+    return value
+
+
+def _integers(name, values, *, minimum=None) -> list[int]:
+    if isinstance(values, numbers.Integral) and not isinstance(values, (bool, np.bool_)):
+        values = [values]
+    if isinstance(values, (str, bytes)) or not isinstance(values, Iterable):
+        raise TypeError(f"{name} must be an integer or an iterable of integers; got {values!r}")
+    out = [_integer(name, v, minimum=minimum) for v in values]
+    if not out:
+        raise ValueError(f"{name} must not be empty")
+    return out
+
+
+def _sampling_frequency(fs) -> float:
+    if isinstance(fs, (bool, np.bool_)) or not isinstance(fs, numbers.Real):
+        raise TypeError(f"fs must be a real number in Hz; got {fs!r}")
+    fs = float(fs)
+    if not np.isfinite(fs) or fs <= 0:
+        raise ValueError(f"fs must be finite and > 0 Hz; got {fs}")
+    return fs
+
+
+def core_options(*, fs, block_rows, past_block_rows=None, orders, n_blocks=50, references=None,
+                 uncertainty=True, demean=True, input_rcond=1e-10) -> "_core.IdentifyOptions":
+    """Check the settings of :func:`identify` and return them as the core's options struct."""
+    o = _core.IdentifyOptions()
+    o.fs = _sampling_frequency(fs)
+    o.block_rows = _integer("block_rows", block_rows, minimum=2)
+    o.past_block_rows = 0 if past_block_rows is None else _integer("past_block_rows", past_block_rows, minimum=1)
+    o.orders = sorted(set(_integers("orders", orders, minimum=1)))
+    o.n_blocks = _integer("n_blocks", n_blocks)
+    o.references = [] if references is None else _integers("references", references, minimum=0)
+    o.uncertainty = bool(uncertainty)
+    o.demean = bool(demean)
+    if not isinstance(input_rcond, numbers.Real) or not (0 <= float(input_rcond) < 1):
+        raise ValueError(f"input_rcond must be a number in [0, 1); got {input_rcond!r}")
+    o.input_rcond = float(input_rcond)
+    o.validate()
+    return o
+
+
+# --------------------------------------------------------------------------- results
+
+
+@dataclass(frozen=True, repr=False)
+class Modes:
+    """The modes identified at one model order, sorted by frequency.
+
+    One mode per complex-conjugate pair of eigenvalues. Frequencies in Hz, damping ratios as
+    fractions (0.02 = 2 %), mode shapes normalised so that their largest-modulus component is
+    exactly 1. The ``*_std`` fields and ``covariance`` are first-order (delta-method) standard
+    deviations and covariances from the block sample covariance of the data covariances; they
+    are ``None`` when the identification ran with ``uncertainty=False``.
+    """
+
+    order: int                                   #: model order n
+    frequency_hz: np.ndarray                     #: (n_modes,) natural frequencies, Hz
+    damping_ratio: np.ndarray                    #: (n_modes,) damping ratios, fraction
+    mode_shape: np.ndarray                       #: (n_outputs, n_modes) complex
+    eigenvalue: np.ndarray                       #: (n_modes,) discrete-time eigenvalues of A
+    reference_component: np.ndarray              #: (n_modes,) component of each shape scaled to 1
+    frequency_std: np.ndarray | None = None      #: (n_modes,) Hz
+    damping_std: np.ndarray | None = None        #: (n_modes,) fraction
+    mode_shape_std_real: np.ndarray | None = None  #: (n_outputs, n_modes)
+    mode_shape_std_imag: np.ndarray | None = None  #: (n_outputs, n_modes)
+    covariance: np.ndarray | None = None         #: (n_modes, 2+2l, 2+2l) of [f, xi, Re shape, Im shape]
+    block_too_short: np.ndarray | None = None    #: (n_modes,) blocks shorter than half the decay time
+    singular_value_gap: float = float("nan")     #: (s_n - s_{n+1}) / its std
+    close_singular_values: bool = False          #: the order cuts singular values within 3 std
+
+    @classmethod
+    def _from_core(cls, m) -> "Modes":
+        has_std = m.frequency_std.size == m.frequency_hz.size and not np.isnan(m.singular_value_gap)
+        l = m.mode_shape.shape[0]
+        npar = 2 + 2 * l
+        cov = None
+        if has_std:
+            # Column i of the core's (npar^2 x n_modes) matrix is mode i's symmetric covariance.
+            cov = np.ascontiguousarray(m.covariance.T).reshape(-1, npar, npar)
+        return cls(
+            order=int(m.order),
+            frequency_hz=m.frequency_hz,
+            damping_ratio=m.damping_ratio,
+            mode_shape=m.mode_shape,
+            eigenvalue=m.eigenvalue,
+            reference_component=m.reference_component,
+            frequency_std=m.frequency_std if has_std else None,
+            damping_std=m.damping_std if has_std else None,
+            mode_shape_std_real=m.mode_shape_std_real if has_std else None,
+            mode_shape_std_imag=m.mode_shape_std_imag if has_std else None,
+            covariance=cov,
+            block_too_short=m.block_too_short if has_std else None,
+            singular_value_gap=float(m.singular_value_gap),
+            close_singular_values=bool(m.close_singular_values),
+        )
+
+    @property
+    def n_modes(self) -> int:
+        return int(self.frequency_hz.size)
+
+    @property
+    def has_uncertainty(self) -> bool:
+        return self.frequency_std is not None
+
+    def __len__(self) -> int:
+        return self.n_modes
+
+    def to_dataframe(self):
+        """One row per mode: frequency, damping and (when computed) their standard deviations."""
+        import pandas as pd
+
+        data = {
+            "order": np.full(self.n_modes, self.order),
+            "frequency_hz": self.frequency_hz,
+            "damping_ratio": self.damping_ratio,
+        }
+        if self.has_uncertainty:
+            data["frequency_std"] = self.frequency_std
+            data["damping_std"] = self.damping_std
+        for k in range(self.mode_shape.shape[0]):
+            data[f"mode_shape_{k}"] = self.mode_shape[k]
+        return pd.DataFrame(data, index=pd.RangeIndex(self.n_modes, name="mode"))
+
+    def table(self) -> str:
+        """The modes as a plain-text table (frequency in Hz, damping in %)."""
+        unc = self.has_uncertainty
+        head = f"{'mode':>4}  {'f [Hz]':>10}" + (f"  {'std f':>9}" if unc else "") + f"  {'xi [%]':>7}"
+        head += f"  {'std xi':>7}" if unc else ""
+        lines = [head]
+        for i in range(self.n_modes):
+            row = f"{i + 1:>4}  {self.frequency_hz[i]:>10.4f}"
+            if unc:
+                row += f"  {self.frequency_std[i]:>9.4f}"
+            row += f"  {100 * self.damping_ratio[i]:>7.3f}"
+            if unc:
+                row += f"  {100 * self.damping_std[i]:>7.3f}"
+            lines.append(row)
+        return "\n".join(lines)
+
+    def __str__(self) -> str:
+        flag = "  (order cuts close singular values: std not meaningful)" if self.close_singular_values else ""
+        return f"order {self.order}: {self.n_modes} modes{flag}\n{self.table()}"
+
+    def __repr__(self) -> str:
+        f = np.array2string(self.frequency_hz, precision=3, separator=", ")
+        return f"Modes(order={self.order}, n_modes={self.n_modes}, frequency_hz={f})"
+
+
+@dataclass(frozen=True, repr=False)
+class Result:
+    """What :func:`identify` returns: the modes at every requested order and the run's status."""
+
+    modes: tuple                      #: tuple of :class:`Modes`, ascending order
+    fs: float                         #: sampling frequency, Hz
+    settings: dict                    #: every setting of the run, for the record
+    singular_values: np.ndarray       #: of the subspace matrix H
+    n_samples: int
+    n_outputs: int
+    n_inputs: int
+    n_columns: int                    #: Hankel columns N
+    n_blocks: int                     #: blocks of the uncertainty (0 without)
+    block_length: int                 #: Hankel columns per block (0 without)
+    channel_mean: np.ndarray          #: mean removed per channel [y, u]
+    input_rank: int = 0               #: numerical rank of R3 (input/output only)
+    input_condition: float = 0.0      #: condition number of R3 (input/output only)
+    input_rank_deficient: bool = False
+    too_few_blocks: bool = False
+    warnings: tuple = field(default_factory=tuple)
+
+    @property
+    def orders(self) -> tuple:
+        return tuple(m.order for m in self.modes)
+
+    def at_order(self, order: int) -> Modes:
+        """The modes identified at model order ``order`` (one of ``orders``)."""
+        for m in self.modes:
+            if m.order == order:
+                return m
+        raise ValueError(f"order {order} was not identified; identified orders: {list(self.orders)}")
+
+    def __iter__(self):
+        return iter(self.modes)
+
+    def __len__(self) -> int:
+        return len(self.modes)
+
+    def to_dataframe(self):
+        """Every pole of every order, one row each (long format: order, mode, f, xi, std...)."""
+        import pandas as pd
+
+        frames = [m.to_dataframe().reset_index() for m in self.modes if m.n_modes]
+        if not frames:
+            return pd.DataFrame(columns=["order", "mode", "frequency_hz", "damping_ratio"])
+        return pd.concat(frames, ignore_index=True)
+
+    def __str__(self) -> str:
+        kind = "input/output" if self.n_inputs else "output-only"
+        lines = [
+            f"modaluq SSI-cov ({kind}): {self.n_samples} samples at {self.fs:g} Hz, "
+            f"{self.n_outputs} outputs" + (f", {self.n_inputs} inputs" if self.n_inputs else ""),
+            f"block_rows={self.settings['block_rows']}, past_block_rows={self.settings['past_block_rows']}, "
+            f"orders {self.orders[0]}..{self.orders[-1]} ({len(self.orders)}), "
+            + (f"{self.n_blocks} blocks of {self.block_length} columns" if self.n_blocks else "no uncertainty"),
+        ]
+        lines += [f"warning: {w}" for w in self.warnings]
+        shown = self.modes if len(self.modes) <= 3 else self.modes[-1:]
+        if len(self.modes) > 3:
+            lines.append(f"(highest order shown; use at_order(n) for the {len(self.modes) - 1} others)")
+        lines += [str(m) for m in shown]
+        return "\n".join(lines)
+
+    def __repr__(self) -> str:
+        return (f"Result(orders={list(self.orders)[:6]}{'...' if len(self.orders) > 6 else ''}, "
+                f"n_samples={self.n_samples}, n_outputs={self.n_outputs}, n_inputs={self.n_inputs})")
+
+
+def _result_from_core(ident, settings, n_outputs, n_inputs) -> Result:
+    return Result(
+        modes=tuple(Modes._from_core(m) for m in ident.modes),
+        fs=settings["fs"],
+        settings=settings,
+        singular_values=ident.singular_values,
+        n_samples=int(ident.n_samples),
+        n_outputs=n_outputs,
+        n_inputs=n_inputs,
+        n_columns=int(ident.n_columns),
+        n_blocks=int(ident.n_blocks),
+        block_length=int(ident.block_length),
+        channel_mean=ident.channel_mean,
+        input_rank=int(ident.input_rank),
+        input_condition=float(ident.input_condition),
+        input_rank_deficient=bool(ident.input_rank_deficient),
+        too_few_blocks=bool(ident.too_few_blocks),
+        warnings=tuple(ident.warnings),
+    )
+
+
+def _settings(o, n_outputs) -> dict:
+    return {
+        "fs": o.fs,
+        "block_rows": o.block_rows,
+        "past_block_rows": o.past_block_rows or o.block_rows,
+        "orders": list(o.orders),
+        "n_blocks": o.n_blocks if o.uncertainty else None,
+        "references": list(o.references) or list(range(n_outputs)),
+        "uncertainty": o.uncertainty,
+        "demean": o.demean,
+        "input_rcond": o.input_rcond,
+    }
+
+
+def _warn(result: Result, stacklevel: int = 3) -> None:
+    for w in result.warnings:
+        warnings.warn(w, ModalUQWarning, stacklevel=stacklevel)
+
+
+def identify(y, u=None, *, fs: float, block_rows: int, past_block_rows: int | None = None,
+             orders: int | Sequence[int], n_blocks: int = 50, references: Sequence[int] | None = None,
+             uncertainty: bool = True, demean: bool = True, input_rcond: float = 1e-10) -> Result:
+    """Identify modes by covariance-driven SSI, with their standard deviations.
+
+    Parameters
+    ----------
+    y : array_like, shape (n_samples, n_outputs) or (n_samples,)
+        Measured outputs (e.g. accelerations). Real numbers; NaN/Inf are refused.
+    u : array_like, shape (n_samples, n_inputs), optional
+        Measured inputs (forces, ground motion). ``None`` for output-only identification.
+    fs : float
+        Sampling frequency in Hz.
+    block_rows : int
+        Future block rows p of the Hankel covariance (>= 2).
+    past_block_rows : int, optional
+        Past block rows q (default p).
+    orders : int or iterable of int
+        Model orders; each must be <= min((p-1) n_outputs, q n_references). All orders come
+        from one SVD at the largest.
+    n_blocks : int
+        Blocks for the covariance of the data covariances (>= 2). Each block should be longer
+        than the slowest mode's decay time; ``Result.warnings`` says when it is not.
+    references : iterable of int, optional
+        Outputs that form the past data matrix (default all).
+    uncertainty : bool
+        Propagate the covariance to every modal parameter (default True); False skips it at no cost.
+    demean : bool
+        Remove each channel's mean over the record (default True).
+    input_rcond : float
+        Eigenvalues of the input covariance R3 below ``input_rcond`` times the largest are dropped
+        from its pseudo-inverse; ``Result.input_rank_deficient`` reports when that happens.
+
+    Returns
+    -------
+    Result
+        ``result.at_order(n)`` gives the :class:`Modes` of order n.
+
+    Examples
+    --------
+    >>> import modaluq
+    >>> sim = modaluq.simulate(20_000, seed=1)
+    >>> result = modaluq.identify(sim.y, sim.u, fs=sim.fs, block_rows=15, orders=12)
+    >>> modes = result.at_order(12)
+    >>> [round(f, 1) for f in modes.frequency_hz]
+    [1.9, 5.6, 8.7, 14.5, 15.9, 17.0]
+    """
+    o = core_options(fs=fs, block_rows=block_rows, past_block_rows=past_block_rows, orders=orders,
+                     n_blocks=n_blocks, references=references, uncertainty=uncertainty, demean=demean,
+                     input_rcond=input_rcond)
+    y = as_samples(y, "y")
+    u = as_samples(u, "u", allow_none=True)
+    if u is not None and u.shape[0] != y.shape[0]:
+        raise ValueError(f"u must have as many samples as y ({y.shape[0]}); got {u.shape[0]}")
+    u_t = np.empty((0, y.shape[0])) if u is None else u.T
+    ident = _core.identify(y.T, u_t, o)
+    result = _result_from_core(ident, _settings(o, y.shape[1]), y.shape[1], 0 if u is None else u.shape[1])
+    _warn(result)
+    return result

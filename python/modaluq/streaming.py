@@ -1,0 +1,106 @@
+"""Streaming: feed a record in chunks (as an acquisition system delivers it), identify at the end.
+
+Any split of the record gives the batch :func:`modaluq.identify` result to rounding, and the
+memory held does not grow with the number of samples (only per-block lag sums are kept).
+"""
+
+from __future__ import annotations
+
+from typing import Sequence
+
+import numpy as np
+
+from . import _core
+from .identification import Result, _integer, _integers, _result_from_core, _settings, _warn, as_samples, core_options
+
+__all__ = ["CovarianceAccumulator"]
+
+
+class CovarianceAccumulator:
+    """Accumulate the Hankel covariances of a record fed in chunks.
+
+    Parameters
+    ----------
+    n_outputs, n_inputs : int
+        Channels of ``y`` and of ``u`` (0 for output-only).
+    block_rows, past_block_rows, references
+        As in :func:`modaluq.identify`.
+    block_length : int
+        Hankel columns per uncertainty block, N_b (the total length is not known in advance,
+        so the block length is given instead of the number of blocks). At least p + q.
+    demean : bool
+        Remove each channel's mean over the whole record (exact, without knowing it in advance).
+    first_sample : int
+        Index in the record of the first sample this accumulator will see; non-zero only for a
+        span that is merged after another one (see :meth:`merge`).
+
+    Examples
+    --------
+    >>> import modaluq
+    >>> sim = modaluq.simulate(20_000, seed=1)
+    >>> acc = modaluq.CovarianceAccumulator(3, 1, block_rows=15, block_length=400)
+    >>> for start in range(0, 20_000, 4096):
+    ...     acc.push(sim.y[start:start + 4096], sim.u[start:start + 4096])
+    >>> result = acc.identify(fs=sim.fs, orders=12)
+    """
+
+    def __init__(self, n_outputs: int, n_inputs: int = 0, *, block_rows: int, past_block_rows: int | None = None,
+                 references: Sequence[int] | None = None, block_length: int, demean: bool = True,
+                 first_sample: int = 0):
+        layout = _core.HankelLayout()
+        layout.n_outputs = _integer("n_outputs", n_outputs, minimum=1)
+        layout.n_inputs = _integer("n_inputs", n_inputs, minimum=0)
+        layout.block_rows = _integer("block_rows", block_rows, minimum=2)
+        layout.past_block_rows = 0 if past_block_rows is None else _integer("past_block_rows", past_block_rows, minimum=1)
+        layout.references = [] if references is None else _integers("references", references, minimum=0)
+        self._acc = _core.CovarianceAccumulator(layout, _integer("block_length", block_length, minimum=1),
+                                                bool(demean), _integer("first_sample", first_sample, minimum=0))
+
+    @property
+    def n_samples(self) -> int:
+        """Samples pushed so far."""
+        return self._acc.n_samples
+
+    @property
+    def block_length(self) -> int:
+        return self._acc.block_length
+
+    def push(self, y, u=None) -> None:
+        """Add samples: ``y`` is ``(n, n_outputs)``, ``u`` is ``(n, n_inputs)`` (omit when output-only)."""
+        layout = self._acc.layout
+        y = as_samples(y, "y")
+        if y.shape[1] != layout.n_outputs:
+            raise ValueError(f"y must have {layout.n_outputs} channels; got shape {y.shape}")
+        if layout.n_inputs:
+            u = as_samples(u, "u")
+            if u.shape != (y.shape[0], layout.n_inputs):
+                raise ValueError(f"u must have shape ({y.shape[0]}, {layout.n_inputs}); got {u.shape}")
+            u_t = u.T
+        else:
+            if u is not None:
+                raise ValueError("u was given but this accumulator has n_inputs=0")
+            u_t = np.empty((0, y.shape[0]))
+        self._acc.push(y.T, u_t)
+
+    def merge(self, following: "CovarianceAccumulator") -> None:
+        """Append an accumulator over the span that directly follows this one."""
+        if not isinstance(following, CovarianceAccumulator):
+            raise TypeError(f"following must be a CovarianceAccumulator; got {type(following).__name__}")
+        self._acc.merge(following._acc)
+
+    def covariances(self, with_blocks: bool = True):
+        """The covariances R1..R4 (and per-block covariances) of everything pushed so far."""
+        return self._acc.finish(bool(with_blocks))
+
+    def identify(self, *, fs: float, orders, uncertainty: bool = True, input_rcond: float = 1e-10) -> Result:
+        """Identify from everything pushed so far (see :func:`modaluq.identify`)."""
+        layout = self._acc.layout
+        o = core_options(fs=fs, block_rows=layout.block_rows, past_block_rows=layout.past_block_rows or None,
+                         orders=orders, n_blocks=2, references=list(layout.references) or None,
+                         uncertainty=uncertainty, demean=self._acc.demean, input_rcond=input_rcond)
+        cov = self._acc.finish(bool(uncertainty))
+        o.n_blocks = max(int(cov.n_blocks), 2)
+        ident = _core.identify_covariances(cov, o)
+        result = _result_from_core(ident, _settings(o, layout.n_outputs), layout.n_outputs, layout.n_inputs)
+        _warn(result)
+        return result
