@@ -88,6 +88,10 @@ def _parser() -> argparse.ArgumentParser:
     d.add_argument("--order", type=int, default=12, help="model order (default 12)")
     d.add_argument("--n-blocks", type=int, default=50, help="blocks for the uncertainty (default 50)")
     d.set_defaults(func=_demo)
+
+    # Further subcommands register themselves here (one module each).
+    # [identify]
+    # [validate]
     return p
 
 
