@@ -14,6 +14,8 @@ from ._core import NumericalError
 from ._core import __version__ as _core_version
 from .identification import ModalUQWarning, Modes, Result, identify
 from .simulate import Simulation, simulate
+from .stabilization import (ClusteringSettings, Diagram, PoleStatus, SelectedModes, StabilityCriteria,
+                            select_modes, stabilization_diagram)
 from .streaming import CovarianceAccumulator
 
 try:
@@ -24,13 +26,20 @@ except PackageNotFoundError:  # pragma: no cover - running from a source tree
     __version__ = _core_version
 
 __all__ = [
+    "ClusteringSettings",
     "CovarianceAccumulator",
+    "Diagram",
     "ModalUQWarning",
     "Modes",
     "NumericalError",
+    "PoleStatus",
     "Result",
+    "SelectedModes",
     "Simulation",
+    "StabilityCriteria",
     "identify",
+    "select_modes",
     "simulate",
+    "stabilization_diagram",
     "__version__",
 ]

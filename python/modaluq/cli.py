@@ -91,7 +91,9 @@ def _parser() -> argparse.ArgumentParser:
 
     # Further subcommands register themselves here (one module each).
     # [identify]
+    from .cli_identify import register; register(sub)  # noqa: E702
     # [validate]
+    from .validation import cli as validate_cli; validate_cli.register(sub)  # noqa: E702
     return p
 
 

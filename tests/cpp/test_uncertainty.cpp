@@ -182,6 +182,46 @@ TEST_CASE("stage d lambda, d shape: Q-matrix path equals finite differences of t
     }
 }
 
+TEST_CASE("stage d lambda, d shape: the batched all-blocks path equals the per-block path") {
+    for (bool io : {false, true}) {
+        CAPTURE(io);
+        const Case c = make_case(io);
+        const Index N = 6, l = 2, nb = 7;
+        const auto sub = modaluq::subspace_matrix(c.cov);
+        const modaluq::Realization re(sub.H, l, N);
+        const MatrixXd G = re.observability();
+        std::mt19937_64 rng(3);
+        std::normal_distribution<double> g01;
+        MatrixXd qa(N, N * nb), qb(N, N * nb), q4(l, N * nb);
+        for (Index k = 0; k < nb; ++k) {
+            MatrixXd dG(G.rows(), N);
+            for (Index i = 0; i < dG.size(); ++i) dG(i) = g01(rng);
+            modaluq::detail::q_matrices(G, dG, l, qa.middleCols(k * N, N), qb.middleCols(k * N, N),
+                                        q4.middleCols(k * N, N));
+        }
+        for (Index n : {4, 6}) {  // order n uses the leading blocks of the order-N matrices
+            CAPTURE(n);
+            const modaluq::StateSpace ss = re.system(n);
+            modaluq::detail::Eigenstructure eig;
+            const modaluq::Modes m = modaluq::modes_from_system(ss, c.o.fs, &eig);
+            const modaluq::detail::OrderContext ctx(eig, ss, re);
+            MatrixXcd dlam;
+            std::vector<MatrixXcd> dshape;
+            modaluq::detail::eigen_perturbation_blocks(ctx, qa, qb, q4, N, nb, dlam, dshape);
+            REQUIRE(dlam.rows() == m.n_modes());
+            for (Index k = 0; k < nb; ++k) {
+                Eigen::VectorXcd dl(m.n_modes());
+                MatrixXcd ds(l, m.n_modes());
+                modaluq::detail::eigen_perturbation(ctx, qa.block(0, k * N, n, n), qb.block(0, k * N, n, n),
+                                                    q4.block(0, k * N, l, n), dl, ds);
+                CHECK((dlam.col(k) - dl).norm() < 1e-10 * dl.norm());
+                for (Index i = 0; i < m.n_modes(); ++i)
+                    CHECK((dshape[i].col(k) - ds.col(i)).norm() < 1e-10 * ds.col(i).norm());
+            }
+        }
+    }
+}
+
 TEST_CASE("stage f, xi, normalised shape: modal_perturbation equals finite differences") {
     const double fs = 50.0;
     const cd lambda = std::exp(cd(-0.02 * 2 * modaluq::detail::pi * 5.0, 2 * modaluq::detail::pi * 5.0) / fs);

@@ -45,11 +45,17 @@ struct Covariances {
 
     /// T_R = [r^1 - rbar, ..., r^nb - rbar] / sqrt(nb (nb - 1)), so that T_R T_R^T estimates
     /// the covariance of r (conventions.md). Needs at least two blocks.
-    Eigen::MatrixXd covariance_factor() const {
-        detail::require(blocks.cols() >= 2, "n_blocks must be >= 2 for the uncertainty, got ",
-                        blocks.cols());
-        const double nb = static_cast<double>(blocks.cols());
-        Eigen::MatrixXd t = blocks.colwise() - blocks.rowwise().mean();
+    Eigen::MatrixXd covariance_factor() const& { return centre_blocks(blocks); }
+    /// The same, reusing the memory of `blocks` (left empty): the per-block matrices are the
+    /// largest object of a run (d_r x n_b doubles), so a large run holds them once.
+    Eigen::MatrixXd covariance_factor() && { return centre_blocks(std::move(blocks)); }
+
+private:
+    static Eigen::MatrixXd centre_blocks(Eigen::MatrixXd t) {
+        detail::require(t.cols() >= 2, "n_blocks must be >= 2 for the uncertainty, got ", t.cols());
+        const double nb = static_cast<double>(t.cols());
+        const Eigen::VectorXd mean = t.rowwise().mean();
+        t.colwise() -= mean;
         t /= std::sqrt(nb * (nb - 1.0));
         return t;
     }
@@ -306,7 +312,8 @@ private:
     /// Add the lag sums of base times [t_from, t_to); buf holds samples from buf_start and
     /// covers [t_from, t_to + L).
     void process(const Eigen::MatrixXd& buf, Index buf_start, Index t_from, Index t_to) {
-        Eigen::MatrixXd stack, rhs;
+        using Strided = Eigen::Map<const Eigen::MatrixXd, 0, Eigen::OuterStride<>>;
+        Eigen::MatrixXd rhs;
         for (Index t = t_from; t < t_to;) {
             const Index k = t / block_length_;
             const Index stop = std::min(t_to, (k + 1) * block_length_);
@@ -315,8 +322,10 @@ private:
             for (Index c0 = t; c0 < stop; c0 += kChunk) {
                 const Index nc = std::min(kChunk, stop - c0);
                 const Index off = c0 - buf_start;
-                stack.resize((lag_ + 1) * d_, nc);
-                for (Index l = 0; l <= lag_; ++l) stack.middleRows(l * d_, d_) = buf.middleCols(off + l, nc);
+                // Column c of the stacked lags [x_c; x_{c+1}; ...; x_{c+L}] is contiguous in the
+                // column-major buffer, so the stack is a view with outer stride d (columns
+                // overlap): no copy, and the GEMM packs it at full speed.
+                const Strided stack(buf.data() + off * d_, (lag_ + 1) * d_, nc, Eigen::OuterStride<>(d_));
                 rhs.resize(nc, d_ + 1);
                 rhs.leftCols(d_) = buf.middleCols(off, nc).transpose();
                 rhs.col(d_).setOnes();

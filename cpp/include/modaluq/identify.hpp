@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <cmath>
 #include <memory>
+#include <utility>
 #include <string>
 #include <vector>
 
@@ -77,10 +78,9 @@ struct Identification {
     }
 };
 
-/// Identify from accumulated covariances (for example from a CovarianceAccumulator fed in
-/// chunks). `cov` must carry per-block matrices when options.uncertainty is on.
-inline Identification identify(const Covariances& cov, IdentifyOptions options) {
-    options.validate();
+namespace detail {
+/// The identification proper; `t_r` is the covariance factor (empty without uncertainty).
+inline Identification identify_with_factor(const Covariances& cov, Eigen::MatrixXd t_r, IdentifyOptions options) {
     std::sort(options.orders.begin(), options.orders.end());
     options.orders.erase(std::unique(options.orders.begin(), options.orders.end()), options.orders.end());
     const HankelLayout& L = cov.layout;
@@ -88,9 +88,6 @@ inline Identification identify(const Covariances& cov, IdentifyOptions options) 
     detail::require(n_max <= L.max_order(), "order ", n_max,
                     " is above what the horizons support: min((block_rows - 1) * n_outputs, past_block_rows * n_references) = ",
                     L.max_order());
-    if (options.uncertainty)
-        detail::require(cov.blocks.cols() >= 2, "n_blocks must be >= 2 for the uncertainty, the covariances have ",
-                        cov.blocks.cols(), " complete blocks");
 
     Identification out;
     out.n_samples = cov.n_samples;
@@ -111,10 +108,9 @@ inline Identification identify(const Covariances& cov, IdentifyOptions options) 
     out.singular_values = re.singular_values();
 
     std::unique_ptr<UncertaintyPropagator> prop;
-    Eigen::MatrixXd t_h;
     double block_seconds = 0.0;
     if (options.uncertainty) {
-        out.n_blocks = cov.blocks.cols();
+        out.n_blocks = t_r.cols();
         out.block_length = cov.block_length;
         block_seconds = static_cast<double>(cov.block_length) / options.fs;
         out.too_few_blocks = out.n_blocks - 1 < 2 + 2 * L.n_outputs;
@@ -122,8 +118,9 @@ inline Identification identify(const Covariances& cov, IdentifyOptions options) 
             out.warnings.push_back(detail::concat(
                 "n_blocks = ", out.n_blocks, " is too few for the joint covariance of the ", 2 + 2 * L.n_outputs,
                 " parameters of a mode (need at least ", 3 + 2 * L.n_outputs, "); the standard deviations are still valid"));
-        t_h = propagate_to_subspace(sub, cov, cov.covariance_factor());
-        prop = std::make_unique<UncertaintyPropagator>(re, t_h, L.rows_past());
+        // T_H lives only while the propagator takes what it needs from it.
+        prop = std::make_unique<UncertaintyPropagator>(re, propagate_to_subspace(sub, cov, std::move(t_r)),
+                                                       L.rows_past());
     }
     out.modes.reserve(options.orders.size());
     Index short_blocks = 0;
@@ -142,6 +139,29 @@ inline Identification identify(const Covariances& cov, IdentifyOptions options) 
             short_blocks, " pole(s) decay more slowly than the blocks are long (block of ", block_seconds,
             " s < half of 1/(2 pi f xi)); their standard deviations are less reliable: use fewer, longer blocks"));
     return out;
+}
+}  // namespace detail
+
+/// Identify from accumulated covariances (for example from a CovarianceAccumulator fed in
+/// chunks). `cov` must carry per-block matrices (at least two) when options.uncertainty is on.
+inline Identification identify(const Covariances& cov, IdentifyOptions options) {
+    options.validate();
+    if (options.uncertainty)
+        detail::require(cov.blocks.cols() >= 2, "n_blocks must be >= 2 for the uncertainty, the covariances have ",
+                        cov.blocks.cols(), " complete blocks");
+    return detail::identify_with_factor(cov, options.uncertainty ? cov.covariance_factor() : Eigen::MatrixXd(),
+                                        std::move(options));
+}
+
+/// The same, taking the covariances over: their per-block matrices become the covariance
+/// factor in place, so the largest object of a run is held once.
+inline Identification identify(Covariances&& cov, IdentifyOptions options) {
+    options.validate();
+    if (options.uncertainty)
+        detail::require(cov.blocks.cols() >= 2, "n_blocks must be >= 2 for the uncertainty, the covariances have ",
+                        cov.blocks.cols(), " complete blocks");
+    Eigen::MatrixXd t_r = options.uncertainty ? std::move(cov).covariance_factor() : Eigen::MatrixXd();
+    return detail::identify_with_factor(cov, std::move(t_r), std::move(options));
 }
 
 /// Identify from samples. y is n_outputs x n_samples (a column is one sample: the memory of a
@@ -163,8 +183,7 @@ inline Identification identify(const Eigen::Ref<const Eigen::MatrixXd>& y,
                         L.max_order());
     }
     const Index n_blocks = options.uncertainty ? options.n_blocks : 1;
-    const Covariances cov = compute_covariances(y, u, L, n_blocks, options.demean, options.uncertainty);
-    return identify(cov, options);
+    return identify(compute_covariances(y, u, L, n_blocks, options.demean, options.uncertainty), options);
 }
 
 }  // namespace modaluq

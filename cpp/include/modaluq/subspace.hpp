@@ -51,8 +51,7 @@ inline SubspaceMatrix subspace_matrix(const Covariances& c, double input_rcond =
 
 /// T_H = J_{H,R} T_R, column by column (uq-math §4.3):
 /// dH = dR1 - dR2 M + G dR3 M - G dR4^T. Output-only: T_H = T_R.
-inline Eigen::MatrixXd propagate_to_subspace(const SubspaceMatrix& s, const Covariances& c,
-                                             const Eigen::MatrixXd& t_r) {
+inline Eigen::MatrixXd propagate_to_subspace(const SubspaceMatrix& s, const Covariances& c, Eigen::MatrixXd t_r) {
     if (!c.has_inputs()) return t_r;
     const HankelLayout& L = c.layout;
     const Index a = L.rows_future(), b = L.rows_past(), pm = L.rows_input();

@@ -122,6 +122,58 @@ inline void eigen_perturbation(const OrderContext& ctx, const Eigen::Ref<const E
     }
 }
 
+/// Stage 4 for all blocks at once, the production path (equal to eigen_perturbation per
+/// block; tested). The Q matrices of block k are the leading n x n (l x n) blocks of
+/// qa/qb/q4.middleCols(k N, N). Restructured so that the work is a few large GEMMs:
+///   [Z_1; ...; Z_nb] = [Qa_1; ...] [Re phi, Im phi] - ([Qb_1; ...] [Re phi, Im phi]) Lambda   (real)
+///   M = chi^H W (n x n, once per order),   d lambda_i = M_{k_i,:} Z_i / (chi_i^H phi_i),
+///   d(C phi_i) = G_i Z_i + Q4 phi_i   with G_i = C V diag(1 / (lambda_i - lambda_j))_{j != k_i} M,
+/// where Z_i (n x nb) gathers column i of every block's Z.
+inline void eigen_perturbation_blocks(const OrderContext& ctx, const Eigen::MatrixXd& qa, const Eigen::MatrixXd& qb,
+                                      const Eigen::MatrixXd& q4, Index N, Index nb, Eigen::MatrixXcd& dlambda,
+                                      std::vector<Eigen::MatrixXcd>& dshape) {
+    const Eigenstructure& e = *ctx.eig;
+    const Index n = ctx.phi.rows(), nm = ctx.phi.cols(), l = q4.rows();
+    Eigen::MatrixXd qa_s(n * nb, n), qb_s(n * nb, n), q4_s(l * nb, n);
+    for (Index k = 0; k < nb; ++k) {
+        qa_s.middleRows(k * n, n) = qa.block(0, k * N, n, n);
+        qb_s.middleRows(k * n, n) = qb.block(0, k * N, n, n);
+        q4_s.middleRows(k * l, l) = q4.block(0, k * N, l, n);
+    }
+    Eigen::MatrixXd ph(n, 2 * nm);
+    ph << ctx.phi.real(), ctx.phi.imag();
+    const Eigen::MatrixXd za = qa_s * ph, zb = qb_s * ph, z4 = q4_s * ph;
+
+    // M^T = W chi-bar = R^{-1} R^{-T} (chi^H)^T.
+    Eigen::MatrixXcd mt = e.left_h.transpose();
+    ctx.rn.transpose().triangularView<Eigen::Lower>().solveInPlace(mt);
+    ctx.rn.triangularView<Eigen::Upper>().solveInPlace(mt);
+    const Eigen::MatrixXcd M = mt.transpose();
+
+    dlambda.resize(nm, nb);
+    dshape.assign(nm, Eigen::MatrixXcd(l, nb));
+    Eigen::MatrixXcd zi(n, nb), g(l, n);
+    Eigen::VectorXcd c(n);
+    for (Index i = 0; i < nm; ++i) {
+        const cd lam = ctx.lambda(i);
+        for (Index k = 0; k < nb; ++k) {
+            const auto a_re = za.block(k * n, i, n, 1), a_im = za.block(k * n, nm + i, n, 1);
+            const auto b_re = zb.block(k * n, i, n, 1), b_im = zb.block(k * n, nm + i, n, 1);
+            // Z = (a_re + i a_im) - lambda (b_re + i b_im)
+            zi.col(k).real() = a_re - lam.real() * b_re + lam.imag() * b_im;
+            zi.col(k).imag() = a_im - lam.real() * b_im - lam.imag() * b_re;
+            dshape[i].col(k).real() = z4.block(k * l, i, l, 1);
+            dshape[i].col(k).imag() = z4.block(k * l, nm + i, l, 1);
+        }
+        const Index ki = e.kept[i];
+        dlambda.row(i).noalias() = M.row(ki) * zi;
+        dlambda.row(i) /= ctx.den(i);
+        for (Index j = 0; j < n; ++j) c(j) = (j == ki) ? cd(0.0) : cd(1.0) / (lam - e.values(j));
+        g.noalias() = (ctx.cv * c.asDiagonal()) * M;
+        dshape[i].noalias() += g * zi;
+    }
+}
+
 /// Stage 5 for one mode: rows [f, xi, Re shape (l), Im shape (l)] of the perturbation factor
 /// from d lambda (1 x nb) and d(C phi) (l x nb) (uq-math §7, normalised shape with the
 /// reference component fixed at its nominal index).
@@ -196,16 +248,9 @@ public:
         if (nm == 0) return;
 
         const detail::OrderContext ctx(eig, ss, re_);
-        Eigen::MatrixXcd dlam(nm, nb_);
-        std::vector<Eigen::MatrixXcd> dshape(nm, Eigen::MatrixXcd(l, nb_));
-        Eigen::VectorXcd dl(nm);
-        Eigen::MatrixXcd ds(l, nm);
-        for (Index k = 0; k < nb_; ++k) {
-            detail::eigen_perturbation(ctx, qa_.block(0, k * N, n, n), qb_.block(0, k * N, n, n),
-                                       q4_.block(0, k * N, l, n), dl, ds);
-            dlam.col(k) = dl;
-            for (Index i = 0; i < nm; ++i) dshape[i].col(k) = ds.col(i);
-        }
+        Eigen::MatrixXcd dlam;
+        std::vector<Eigen::MatrixXcd> dshape;
+        detail::eigen_perturbation_blocks(ctx, qa_, qb_, q4_, N, nb_, dlam, dshape);
         for (Index i = 0; i < nm; ++i) {
             const Eigen::VectorXcd raw = ss.C.cast<cd>() * ctx.phi.col(i);
             const Eigen::MatrixXd ut = detail::modal_perturbation(ctx.lambda(i), fs, raw, modes.reference_component(i),

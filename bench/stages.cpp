@@ -1,0 +1,85 @@
+// Time per stage of the C++ core on the benchmark configurations (no Python).
+// Build: g++ -O3 -march=native -DNDEBUG -std=c++17 -I cpp/include -I /usr/include/eigen3 bench/stages.cpp
+#include <modaluq/modaluq.hpp>
+
+#include <chrono>
+#include <cstdio>
+#include <random>
+
+using namespace modaluq;
+using clk = std::chrono::steady_clock;
+static double since(clk::time_point t) { return std::chrono::duration<double>(clk::now() - t).count(); }
+
+// AR(2) oscillators mixed into l channels: enough structure for the timing, no simulator needed.
+static Eigen::MatrixXd signal(Index l, Index n, unsigned seed) {
+    std::mt19937_64 g(seed);
+    std::normal_distribution<double> nd;
+    Eigen::MatrixXd y(l, n);
+    const int k = 8;
+    std::vector<double> a1(k), a2(k), x1(k, 0), x2(k, 0);
+    for (int i = 0; i < k; ++i) {
+        const double r = 0.995, th = 0.1 + 0.35 * i;
+        a1[i] = 2 * r * std::cos(th);
+        a2[i] = -r * r;
+    }
+    Eigen::MatrixXd mix = Eigen::MatrixXd::Random(l, k);
+    Eigen::VectorXd s(k);
+    for (Index t = 0; t < n; ++t) {
+        for (int i = 0; i < k; ++i) {
+            const double x = a1[i] * x1[i] + a2[i] * x2[i] + nd(g);
+            x2[i] = x1[i];
+            x1[i] = x;
+            s(i) = x;
+        }
+        y.col(t) = mix * s;
+        for (Index c = 0; c < l; ++c) y(c, t) += 0.1 * nd(g);
+    }
+    return y;
+}
+
+static void run(const char* name, Index l, Index n, Index p, Index nmax, Index nb, bool unc) {
+    const Eigen::MatrixXd y = signal(l, n, 1);
+    IdentifyOptions o;
+    o.fs = 50;
+    o.block_rows = p;
+    for (Index k = 2; k <= nmax; k += 2) o.orders.push_back(k);
+    o.n_blocks = nb;
+    o.uncertainty = unc;
+    const HankelLayout L = o.layout(l, 0);
+    auto t0 = clk::now();
+    const Covariances cov = compute_covariances(y, Eigen::MatrixXd(), L, unc ? nb : 1, true, unc);
+    const double t_cov = since(t0);
+    t0 = clk::now();
+    const SubspaceMatrix sub = subspace_matrix(cov);
+    const Realization re(sub.H, l, nmax);
+    const double t_svd = since(t0);
+    double t_th = 0, t_prop = 0, t_orders = 0;
+    std::unique_ptr<UncertaintyPropagator> prop;
+    if (unc) {
+        t0 = clk::now();
+        const Eigen::MatrixXd th = propagate_to_subspace(sub, cov, cov.covariance_factor());
+        t_th = since(t0);
+        t0 = clk::now();
+        prop = std::make_unique<UncertaintyPropagator>(re, th, L.rows_past());
+        t_prop = since(t0);
+    }
+    t0 = clk::now();
+    for (Index k : o.orders) {
+        const StateSpace ss = re.system(k);
+        detail::Eigenstructure eig;
+        Modes m = modes_from_system(ss, o.fs, prop ? &eig : nullptr);
+        if (prop) prop->apply(m, eig, ss, o.fs, 100.0);
+    }
+    t_orders = since(t0);
+    t0 = clk::now();
+    identify(y, Eigen::MatrixXd(), o);
+    const double t_all = since(t0);
+    std::printf("%-3s cov %.3f  svd %.3f  T_H %.3f  dGamma+Q %.3f  orders %.3f | identify() %.3f s\n", name, t_cov,
+                t_svd, t_th, t_prop, t_orders, t_all);
+}
+
+int main() {
+    run("S1", 3, 1000000, 40, 100, 50, false);
+    run("U1", 3, 100000, 40, 100, 50, true);
+    run("U2", 20, 100000, 20, 100, 50, true);
+}

@@ -1,0 +1,213 @@
+"""Plots: stabilization diagram (paper Figure 3) and mode shapes, each with ±1σ error bars.
+
+matplotlib is imported inside the functions (optional dependency, extra ``plot``); everything
+works with the non-interactive Agg backend. Each function draws into the given Axes/Figure or a
+new one and returns the :class:`matplotlib.figure.Figure`; nothing is shown or saved.
+
+>>> import modaluq                                                     # doctest: +SKIP
+>>> diagram = modaluq.stabilization_diagram(result)                    # doctest: +SKIP
+>>> fig = diagram.plot(y=sim.y, selected=diagram.select_modes())       # doctest: +SKIP
+>>> fig.savefig("diagram.png", dpi=120)                                # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["STATUS_STYLE", "mode_shapes", "stabilization_diagram"]
+
+#: How each pole status is drawn: (marker, colour, face colour, marker size, legend label).
+STATUS_STYLE = {
+    "stable": ("o", "tab:green", "tab:green", 4.5, "stable (f, ξ, MAC)"),
+    "stable_frequency": ("v", "tab:blue", "none", 4.5, "stable frequency"),
+    "unstable": ("x", "tab:orange", "tab:orange", 4.0, "unstable"),
+    "rejected": (".", "0.65", "0.65", 3.0, "rejected (ξ range, σ_f/f)"),
+}
+
+
+def _axes(ax, figsize):
+    import matplotlib.pyplot as plt
+
+    if ax is None:
+        fig, ax = plt.subplots(figsize=figsize, layout="constrained")
+        return fig, ax
+    return ax.figure, ax
+
+
+def stabilization_diagram(diagram, ax=None, *, y=None, spectrum=None, selected=None, show_rejected=True,
+                          nperseg=None, frequency_range=None, figsize=(9.0, 6.0)):
+    """Stabilization diagram: every pole at (frequency, model order) with ±σ_f horizontal bars.
+
+    Poles are marked by :class:`~modaluq.stabilization.PoleStatus` (see ``STATUS_STYLE``);
+    non-rejected poles carry horizontal error bars of ±1 analytic standard deviation of the
+    frequency (rejected poles are drawn without bars: theirs often span the whole axis). When
+    output samples are given, the singular values of their cross power spectral density matrix
+    are drawn behind on a logarithmic twin axis, like Figure 3 of the reference paper. Selected
+    modes are marked by dotted vertical lines numbered at the top.
+
+    Parameters
+    ----------
+    diagram : modaluq.stabilization.Diagram
+    ax : matplotlib.axes.Axes, optional
+        Where to draw; a new figure when None.
+    y : array_like, shape (n_samples, n_outputs), optional
+        Output samples of the identification, for the spectrum background.
+    spectrum : tuple (frequency_hz, singular_values), optional
+        A precomputed :func:`~modaluq.stabilization.output_spectrum_singular_values` (instead of ``y``).
+    selected : modaluq.stabilization.SelectedModes, optional
+        Modes to mark.
+    show_rejected : bool
+        Draw the rejected poles (grey dots), default True.
+    nperseg : int, optional
+        Welch segment length of the spectrum (see ``output_spectrum_singular_values``).
+    frequency_range : (float, float), optional
+        Horizontal limits in Hz; default 0 to fs/2.
+    figsize : (float, float)
+        Size in inches of a new figure.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        With a spectrum, the twin axes holding it comes right after ``ax`` in ``fig.axes``.
+        The poles of each status are one errorbar container of ``ax.containers``, labelled
+        ``"<label> (<count>)"``.
+    """
+    from .stabilization import Diagram, PoleStatus, output_spectrum_singular_values
+
+    if not isinstance(diagram, Diagram):
+        raise TypeError(f"diagram must be a modaluq Diagram; got {type(diagram).__name__}")
+    if y is not None and spectrum is not None:
+        raise TypeError("pass y or spectrum, not both")
+    fig, ax = _axes(ax, figsize)
+
+    spec_ax = None
+    if y is not None:
+        spectrum = output_spectrum_singular_values(y, diagram.fs, nperseg=nperseg)
+    if spectrum is not None:
+        freq, sv = (np.asarray(a) for a in spectrum)
+        if sv.ndim == 1:
+            sv = sv[:, None]
+        spec_ax = ax.twinx()
+        for k in range(sv.shape[1]):
+            spec_ax.semilogy(freq[1:], sv[1:, k], color="0.25" if k == 0 else "0.6",
+                             lw=0.9 if k == 0 else 0.6, zorder=1, label="_nolegend_")
+        spec_ax.set_ylabel("singular values of the output PSD matrix")
+        # poles in front of the spectrum
+        ax.set_zorder(spec_ax.get_zorder() + 1)
+        ax.patch.set_visible(False)
+
+    handles = []
+    for status in PoleStatus:
+        if status is PoleStatus.REJECTED and not show_rejected:
+            continue
+        mask = diagram.is_status(status)
+        marker, colour, face, size, label = STATUS_STYLE[status.value]
+        if not mask.any():
+            continue
+        f = diagram.frequency_hz[mask]
+        n = diagram.order[mask]
+        xerr = None
+        if status is not PoleStatus.REJECTED and diagram.has_uncertainty:
+            xerr = np.nan_to_num(diagram.frequency_std[mask], nan=0.0)
+        h = ax.errorbar(f, n, xerr=xerr, fmt=marker, color=colour, mfc=face, ms=size, lw=0.8,
+                        capsize=0, elinewidth=0.8, label=f"{label} ({int(mask.sum())})", zorder=3)
+        handles.append(h)
+
+    if selected is not None:
+        for k, fk in enumerate(selected.frequency_hz):
+            ax.axvline(fk, color="k", ls=":", lw=0.8, zorder=2)
+            ax.annotate(str(k + 1), (fk, 1.0), xycoords=("data", "axes fraction"), xytext=(0, 2),
+                        textcoords="offset points", ha="center", va="bottom", fontsize=8)
+    lo, hi = (0.0, diagram.fs / 2) if frequency_range is None else map(float, frequency_range)
+    ax.set_xlim(lo, hi)
+    if diagram.orders:
+        ax.set_ylim(0, max(diagram.orders) * 1.04 + 1)
+    ax.set_xlabel("frequency [Hz]")
+    ax.set_ylabel("model order")
+    kind = "±1σ bars" if diagram.has_uncertainty else "no uncertainty"
+    ax.set_title(f"Stabilization diagram ({kind})", fontsize=10, pad=14 if selected is not None else 6)
+    if handles:
+        ax.legend(loc="lower right", fontsize=8, framealpha=0.85)
+    return fig
+
+
+def mode_shapes(modes, fig=None, *, channel_positions=None, ncols=3, figsize=None):
+    """Bar charts of mode shapes, real and imaginary parts, with ±1σ error bars.
+
+    Shapes are normalised so that their largest-modulus component is 1 (its σ is 0 by
+    construction). For lightly damped structures the imaginary parts are small; their bars make
+    visible how far a shape is from a real (normal) mode, relative to its uncertainty.
+
+    Parameters
+    ----------
+    modes : SelectedModes or Modes
+        Anything with ``frequency_hz``, ``damping_ratio``, ``mode_shape`` (n_outputs × n_modes)
+        and optionally ``mode_shape_std_real`` / ``mode_shape_std_imag``, ``frequency_std``,
+        ``damping_std`` and ``output_names``.
+    fig : matplotlib.figure.Figure, optional
+        Drawn into (cleared first); a new figure when None.
+    channel_positions : array_like, shape (n_outputs,), optional
+        Positions of the sensors (any unit) for the horizontal axis; default the channel index.
+    ncols : int
+        Subplots per row.
+    figsize : (float, float), optional
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    shape = np.asarray(modes.mode_shape)
+    if shape.ndim != 2:
+        raise ValueError(f"modes.mode_shape must be 2-D (n_outputs, n_modes); got shape {shape.shape}")
+    n_out, n_modes = shape.shape
+    names = tuple(getattr(modes, "output_names", ()) or (f"y{k}" for k in range(n_out)))
+    sr = getattr(modes, "mode_shape_std_real", None)
+    si = getattr(modes, "mode_shape_std_imag", None)
+    sf = getattr(modes, "frequency_std", None)
+    sx = getattr(modes, "damping_std", None)
+    if channel_positions is None:
+        x = np.arange(n_out, dtype=float)
+    else:
+        x = np.asarray(channel_positions, dtype=float)
+        if x.shape != (n_out,):
+            raise ValueError(f"channel_positions must have {n_out} entries; got shape {x.shape}")
+    if not isinstance(ncols, int) or ncols < 1:
+        raise ValueError(f"ncols must be a positive integer; got {ncols!r}")
+    ncols = max(1, min(ncols, n_modes))
+    nrows = max(1, -(-n_modes // ncols))
+    if figsize is None:
+        figsize = (3.4 * ncols, 2.6 * nrows + 0.3)
+    if fig is None:
+        import matplotlib.pyplot as plt
+
+        fig = plt.figure(figsize=figsize, layout="constrained")
+    else:
+        fig.clear()
+    if n_modes == 0:
+        fig.text(0.5, 0.5, "no modes", ha="center", va="center")
+        return fig
+    axes = fig.subplots(nrows, ncols, squeeze=False, sharey=True)
+    spacing = np.min(np.diff(np.sort(x))) if n_out > 1 else 1.0
+    w = 0.38 * spacing
+    for i in range(n_modes):
+        ax = axes.flat[i]
+        err_r = None if sr is None else np.nan_to_num(np.asarray(sr)[:, i])
+        err_i = None if si is None else np.nan_to_num(np.asarray(si)[:, i])
+        ax.bar(x - w / 2, shape[:, i].real, w, yerr=err_r, color="tab:blue", capsize=2,
+               error_kw={"lw": 0.8}, label="real")
+        ax.bar(x + w / 2, shape[:, i].imag, w, yerr=err_i, color="tab:orange", capsize=2,
+               error_kw={"lw": 0.8}, label="imag")
+        ax.axhline(0, color="k", lw=0.5)
+        ax.set_xticks(x, names, fontsize=8)
+        f, xi = modes.frequency_hz[i], modes.damping_ratio[i]
+        if sf is not None and np.isfinite(np.asarray(sf)[i]):
+            t = f"{f:.4g} ± {np.asarray(sf)[i]:.2g} Hz, ξ {100 * xi:.3g} ± {100 * np.asarray(sx)[i]:.2g} %"
+        else:
+            t = f"{f:.4g} Hz, ξ {100 * xi:.3g} %"
+        ax.set_title(f"mode {i + 1}: {t}", fontsize=8)
+    for ax in list(axes.flat)[n_modes:]:
+        ax.set_visible(False)
+    axes.flat[0].set_ylim(-1.15, 1.15)
+    axes.flat[0].legend(fontsize=7, loc="lower left")
+    fig.supylabel("mode shape (±1σ)", fontsize=9)
+    return fig

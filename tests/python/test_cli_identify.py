@@ -1,0 +1,175 @@
+"""``modaluq identify``: order parsing, the whole run on a CSV file, reports, and one-line errors."""
+
+import csv
+import hashlib
+import json
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+import modaluq
+from modaluq.cli import main
+from modaluq.cli_identify import parse_orders
+
+HEADER = ["time [s]", "acc1 [m/s^2]", "acc2 [m/s^2]", "acc5 [m/s^2]", "force [N]"]
+
+
+def write_chain_csv(path, sim, n_rows=None):
+    """The chain as CSV: a header row, a time column, outputs, then the input force."""
+    n = sim.n_samples if n_rows is None else n_rows
+    t = np.arange(n) / sim.fs
+    data = np.column_stack([t, sim.y[:n], sim.u[:n]])
+    np.savetxt(path, data, delimiter=",", header=",".join(HEADER), comments="", fmt="%.10g")
+    return path
+
+
+@pytest.fixture(scope="module")
+def chain_csv(tmp_path_factory):
+    sim = modaluq.simulate(100_000, seed=1)
+    return sim, write_chain_csv(tmp_path_factory.mktemp("cli") / "chain.csv", sim)
+
+
+# --------------------------------------------------------------------------- --orders
+
+
+@pytest.mark.parametrize("text,expected", [
+    ("2:10:2", [2, 4, 6, 8, 10]), ("2:9:3", [2, 5, 8]), ("3:6", [3, 4, 5, 6]), ("12", [12]),
+    ("4, 8,12", [4, 8, 12]), ("12,4,4", [4, 12]), (" 2:4 ", [2, 3, 4]),
+])
+def test_parse_orders(text, expected):
+    assert parse_orders(text) == expected
+
+
+@pytest.mark.parametrize("text,match", [
+    ("", "empty"), ("a", "not an integer"), ("10:2", "below"), ("2:10:0", "step"), ("0", ">= 1"),
+    ("1:2:3:4", "a:b or a:b:step"), ("2:x", "'x' is not an integer"),
+])
+def test_parse_orders_errors_name_the_option(text, match):
+    with pytest.raises(ValueError, match=match) as info:
+        parse_orders(text)
+    assert "--orders" in str(info.value)
+
+
+def test_parse_read_options():
+    from modaluq.cli_identify import parse_read_options
+
+    assert parse_read_options(["dataset=/daq/acc", "transpose=true", "records=[0, 2]", "fs_hint=2.5"]) == {
+        "dataset": "/daq/acc", "transpose": True, "records": [0, 2], "fs_hint": 2.5}
+    assert parse_read_options(None) == {}
+
+
+# --------------------------------------------------------------------------- end to end
+
+
+def test_identify_csv_end_to_end(chain_csv, tmp_path, capsys):
+    for module in ("matplotlib", "pandas", "xarray", "netCDF4"):   # extras plot and export
+        pytest.importorskip(module)
+    sim, path = chain_csv
+    png, js, table, nc = (tmp_path / n for n in ("diagram.png", "modes.json", "modes.csv", "diagram.nc"))
+    status = main(["identify", str(path), "--inputs", "force", "--block-rows", "25", "--orders", "2:60:2",
+                   "--plot", str(png), "--out", str(js), "--out", str(table), "--out", str(nc), "--no-progress"])
+    out, err = capsys.readouterr()
+    assert status == 0, err
+    assert "6 modes" in out and "std f" in out and "input/output" in out
+
+    # the plot is a real PNG image
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    import matplotlib.pyplot as plt
+
+    img = plt.imread(png)
+    assert img.ndim == 3 and img.shape[0] > 0 and img.shape[1] > 0
+
+    # JSON: stamp and six modes with σ
+    report = json.loads(js.read_text())
+    stamp = report["stamp"]
+    assert stamp["modaluq_version"] == modaluq.__version__
+    assert stamp["input_file"]["sha256"] == hashlib.sha256(path.read_bytes()).hexdigest()
+    assert stamp["created_utc"].endswith("+00:00")
+    ident = stamp["settings"]["identification"]
+    assert ident["block_rows"] == 25 and ident["orders"] == list(range(2, 61, 2)) and ident["n_blocks"] == 50
+    assert stamp["settings"]["channels"] == {"outputs": ["acc1", "acc2", "acc5"], "inputs": ["force"],
+                                             "references": ["acc1", "acc2", "acc5"]}
+    assert {"max_frequency_change", "min_mac", "frequency_std_factor"} <= set(stamp["settings"]["stability"])
+    modes = report["modes"]
+    assert len(modes) == 6
+    f = np.array([m["frequency_hz"] for m in modes])
+    sf = np.array([m["frequency_std"] for m in modes])
+    assert np.all(sf > 0) and all(m["damping_std"] > 0 and m["frequency_spread"] >= 0 for m in modes)
+    assert np.all(np.abs(f - sim.frequency_hz) <= 3 * sf)
+    assert set(modes[0]["mode_shape"]) == {"acc1", "acc2", "acc5"}
+    assert {"real", "imag", "std_real", "std_imag", "spread_real"} <= set(modes[0]["mode_shape"]["acc1"])
+
+    # CSV: the same six modes with σ
+    with open(table, newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    assert len(rows) == 6
+    np.testing.assert_allclose([float(r["frequency_hz"]) for r in rows], f, rtol=1e-12)
+    np.testing.assert_allclose([float(r["frequency_std"]) for r in rows], sf, rtol=1e-12)
+
+    # NetCDF: the full diagram
+    import xarray as xr
+
+    with xr.open_dataset(nc) as ds:
+        assert ds.sizes["pole"] == report["diagram"]["n_poles"] and ds.sizes["mode"] == 6
+        assert set(ds["status"].values.astype(str)) <= {"stable", "stable_frequency", "unstable", "rejected"}
+        assert json.loads(ds.attrs["stamp"])["input_file"]["sha256"] == stamp["input_file"]["sha256"]
+
+
+def test_identify_csv_output_only(chain_csv, capsys):
+    _, path = chain_csv
+    status = main(["identify", str(path), "--outputs", "acc1", "acc2", "acc5", "--block-rows", "25",
+                   "--orders", "2:60:2", "--no-progress"])
+    out, err = capsys.readouterr()
+    assert status == 0, err
+    assert "output-only" in out and "6 modes" in out
+
+
+# --------------------------------------------------------------------------- errors
+
+
+def test_nan_in_csv_is_one_line_naming_row_and_column(tmp_path):
+    sim = modaluq.simulate(2_000, seed=4)
+    path = write_chain_csv(tmp_path / "bad.csv", sim)
+    lines = path.read_text().splitlines()
+    data_row = 57                                    # 0-based data row -> file line data_row + 2
+    cells = lines[data_row + 1].split(",")
+    cells[2] = "nan"                                  # column 'acc2'
+    lines[data_row + 1] = ",".join(cells)
+    path.write_text("\n".join(lines) + "\n")
+    proc = subprocess.run([sys.executable, "-m", "modaluq.cli", "identify", str(path), "--inputs", "force"],
+                          capture_output=True, text=True, timeout=120, env={**os.environ, "PYTHONWARNINGS": "ignore"})
+    assert proc.returncode == 2
+    err = proc.stderr.strip().splitlines()
+    assert len(err) == 1, proc.stderr
+    assert "Traceback" not in proc.stderr
+    assert f"line {data_row + 2}" in err[0] and "'acc2'" in err[0] and "NaN" in err[0]
+
+
+@pytest.mark.parametrize("argv,match", [
+    (["--inputs", "hammer"], "--inputs: channel 'hammer' not found"),
+    (["--orders", "2:x"], "--orders"),
+    (["--out", "modes.xlsx"], "--out modes.xlsx: unsupported extension"),
+    (["--inputs", "force", "--references", "force"], "--references: channel 'force' not found"),
+    (["--inputs", "force", "--outputs", "force"], "both select channel 'force'"),
+    (["--min-mac", "1.5"], "--min-mac must be <= 1"),
+    (["--block-rows", "5", "--orders", "2:60:2"], "order 60"),
+    (["--read-option", "bogus=1"], "bogus"),
+    (["--read-option", "novalue"], "--read-option 'novalue': expected KEY=VALUE"),
+])
+def test_bad_arguments_give_one_line_and_status_2(chain_csv, argv, match, capsys, tmp_path, monkeypatch):
+    _, path = chain_csv
+    monkeypatch.chdir(tmp_path)
+    status = main(["identify", str(path), "--no-progress"] + argv)
+    out, err = capsys.readouterr()
+    assert status == 2
+    assert len(err.strip().splitlines()) == 1 and err.startswith("modaluq identify: error: ")
+    assert match in err
+
+
+def test_missing_file_is_one_line(capsys, tmp_path):
+    assert main(["identify", str(tmp_path / "nothere.csv")]) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and "no such file" in err

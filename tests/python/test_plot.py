@@ -1,0 +1,120 @@
+"""Plots: the stabilization diagram draws ±σ_f bars at every pole over the output spectrum; the
+mode-shape plot draws ±σ bars on the shape components. Checked on the drawn artists."""
+
+import numpy as np
+import pytest
+
+import modaluq
+from modaluq.stabilization import PoleStatus, output_spectrum_singular_values
+
+matplotlib = pytest.importorskip("matplotlib")
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+from modaluq.plot import STATUS_STYLE, mode_shapes, stabilization_diagram  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def small_chain():
+    sim = modaluq.simulate(20_000, seed=2)
+    result = modaluq.identify(sim.y, sim.u, fs=sim.fs, block_rows=15, orders=range(2, 31, 2))
+    diagram = modaluq.stabilization_diagram(result, output_names=["m1", "m2", "m5"])
+    return sim, diagram, diagram.select_modes()
+
+
+@pytest.fixture(autouse=True)
+def _close_figures():
+    yield
+    plt.close("all")
+
+
+def _container(ax, status):
+    label = STATUS_STYLE[status.value][-1]
+    found = [c for c in ax.containers if c.get_label().startswith(label + " (")]
+    return found[0] if found else None
+
+
+def test_diagram_error_bars_are_plus_minus_one_sigma(small_chain):
+    sim, d, sel = small_chain
+    fig = d.plot(y=sim.y, selected=sel)
+    ax = fig.axes[0]
+    for status in (PoleStatus.STABLE, PoleStatus.STABLE_FREQUENCY, PoleStatus.UNSTABLE):
+        mask = d.is_status(status)
+        c = _container(ax, status)
+        if not mask.any():
+            assert c is None
+            continue
+        assert c.get_label().endswith(f"({mask.sum()})")
+        line, _, (bars,) = c.lines[0], c.lines[1], c.lines[2]
+        np.testing.assert_array_equal(line.get_xdata(), d.frequency_hz[mask])
+        np.testing.assert_array_equal(line.get_ydata(), d.order[mask])
+        seg = np.array(bars.get_segments())          # (n, 2 points, xy)
+        np.testing.assert_allclose(seg[:, 0, 0], d.frequency_hz[mask] - d.frequency_std[mask], rtol=1e-12)
+        np.testing.assert_allclose(seg[:, 1, 0], d.frequency_hz[mask] + d.frequency_std[mask], rtol=1e-12)
+        np.testing.assert_array_equal(seg[:, 0, 1], d.order[mask])
+    # rejected poles are drawn, without bars
+    c = _container(ax, PoleStatus.REJECTED)
+    assert c is not None and c.has_xerr is False
+    # one dotted vertical line per selected mode
+    dotted = [ln for ln in ax.lines if ln.get_linestyle() == ":"]
+    np.testing.assert_allclose(sorted(ln.get_xdata()[0] for ln in dotted), sel.frequency_hz)
+    assert ax.get_xlim() == (0.0, sim.fs / 2)
+
+
+def test_diagram_spectrum_axis_is_logarithmic_and_sums_to_the_auto_spectra(small_chain):
+    import scipy.signal
+
+    sim, d, _ = small_chain
+    fig = d.plot(y=sim.y, nperseg=512)
+    assert len(fig.axes) == 2
+    spec = fig.axes[1]
+    assert spec.get_yscale() == "log"
+    assert len(spec.lines) == 3  # one curve per singular value (3 outputs)
+    # the PSD matrix is Hermitian positive semidefinite: its singular values sum to its trace,
+    # the sum of the auto spectra (independent Welch estimates of each channel)
+    _, sv = output_spectrum_singular_values(sim.y, sim.fs, nperseg=512)
+    f, pxx = scipy.signal.welch(sim.y - sim.y.mean(axis=0), fs=sim.fs, nperseg=512, axis=0)
+    np.testing.assert_allclose(sv.sum(axis=1), pxx.sum(axis=1), rtol=1e-9)
+    drawn = np.sum([ln.get_ydata() for ln in spec.lines], axis=0)
+    np.testing.assert_allclose(drawn, pxx[1:].sum(axis=1), rtol=1e-9)
+
+
+def test_diagram_options(small_chain):
+    sim, d, _ = small_chain
+    fig, ax = plt.subplots()
+    assert d.plot(ax=ax, show_rejected=False, frequency_range=(1, 10)) is fig
+    assert len(fig.axes) == 1                       # no spectrum without y
+    assert _container(ax, PoleStatus.REJECTED) is None
+    assert ax.get_xlim() == (1.0, 10.0)
+    with pytest.raises(TypeError, match="diagram"):
+        stabilization_diagram(sim)
+
+
+def test_mode_shape_bars_and_error_bars(small_chain):
+    sim, _, sel = small_chain
+    fig = sel.plot()
+    visible = [ax for ax in fig.axes if ax.get_visible()]
+    assert len(visible) == sel.n_modes
+    for k, ax in enumerate(visible):
+        from matplotlib.container import BarContainer
+
+        real_bars, imag_bars = [c for c in ax.containers if isinstance(c, BarContainer)]
+        np.testing.assert_allclose([p.get_height() for p in real_bars.patches], sel.mode_shape[:, k].real)
+        np.testing.assert_allclose([p.get_height() for p in imag_bars.patches], sel.mode_shape[:, k].imag)
+        seg = np.array(real_bars.errorbar.lines[2][0].get_segments())
+        np.testing.assert_allclose(seg[:, 1, 1] - seg[:, 0, 1], 2 * sel.mode_shape_std_real[:, k], rtol=1e-9,
+                                   atol=1e-15)
+        assert [t.get_text() for t in ax.get_xticklabels()] == ["m1", "m2", "m5"]
+    # also works on the Modes of one order (no output names, same σ fields)
+    modes = modaluq.identify(sim.y, sim.u, fs=sim.fs, block_rows=15, orders=12).at_order(12)
+    fig2 = mode_shapes(modes)
+    assert sum(ax.get_visible() for ax in fig2.axes) == modes.n_modes
+    assert [t.get_text() for t in fig2.axes[0].get_xticklabels()] == ["y0", "y1", "y2"]
+
+
+def test_png_written_and_readable(small_chain, tmp_path):
+    sim, d, sel = small_chain
+    path = tmp_path / "diagram.png"
+    d.plot(y=sim.y, selected=sel).savefig(path, dpi=60)
+    assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    img = plt.imread(path)
+    assert img.ndim == 3 and img.shape[0] > 100 and img.shape[1] > 100

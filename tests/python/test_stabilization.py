@@ -1,0 +1,392 @@
+"""Stabilization diagram and automatic mode selection.
+
+Unit tests use small hand-made pole sets whose expected status follows from the documented
+rule; the end-to-end test identifies the paper's 6-DOF chain and checks that the automatic
+selection finds exactly its six modes, each within 3 analytic standard deviations.
+"""
+
+import math
+
+import numpy as np
+import pytest
+
+import modaluq
+from modaluq.identification import Modes, Result
+from modaluq.stabilization import (ClusteringSettings, Diagram, PoleStatus, StabilityCriteria,
+                                   modal_assurance_criterion, select_modes, stabilization_diagram)
+
+SHAPE_A = (1.0, 0.5, -0.3)
+SHAPE_B = (0.2, -0.7, 1.0)
+SHAPE_C = (0.6, 1.0, 0.4)
+
+
+def pole(f, xi=0.02, shape=SHAPE_A, sf=None, sxi=None):
+    """One hand-made pole; default σ_f = 0.1 % of f (passes every σ test below)."""
+    return {"f": f, "xi": xi, "shape": shape, "sf": 1e-3 * f if sf is None else sf,
+            "sxi": 0.05 * abs(xi) if sxi is None else sxi}
+
+
+def make_result(poles_by_order, *, with_std=True, close_orders=()):
+    """A modaluq.Result holding the given poles: {order: [pole(...), ...]}."""
+    n_out = 3
+    modes = []
+    for n in sorted(poles_by_order):
+        rows = sorted(poles_by_order[n], key=lambda p: p["f"])
+        k = len(rows)
+        shape = np.array([p["shape"] for p in rows], dtype=complex).T.reshape(n_out, k)
+        std = dict(
+            frequency_std=np.array([p["sf"] for p in rows], float),
+            damping_std=np.array([p["sxi"] for p in rows], float),
+            mode_shape_std_real=np.full((n_out, k), 1e-3),
+            mode_shape_std_imag=np.full((n_out, k), 1e-3),
+        ) if with_std else {}
+        modes.append(Modes(order=n, frequency_hz=np.array([p["f"] for p in rows], float),
+                           damping_ratio=np.array([p["xi"] for p in rows], float), mode_shape=shape,
+                           eigenvalue=np.zeros(k, complex), reference_component=np.zeros(k, np.int64),
+                           close_singular_values=n in close_orders, **std))
+    return Result(modes=tuple(modes), fs=100.0, settings={"fs": 100.0}, singular_values=np.ones(1),
+                  n_samples=10_000, n_outputs=n_out, n_inputs=0, n_columns=9_000,
+                  n_blocks=50 if with_std else 0, block_length=180, channel_mean=np.zeros(n_out))
+
+
+def status_of(diagram, order, f):
+    i = int(np.flatnonzero((diagram.order == order) & np.isclose(diagram.frequency_hz, f))[0])
+    return diagram.status[i], diagram.reason[i], i
+
+
+# --------------------------------------------------------------------------- MAC
+
+
+def test_mac_is_one_for_scaled_shapes_and_zero_for_orthogonal_ones():
+    a = np.array([1.0, 0.5 - 0.2j, -0.3])
+    assert modal_assurance_criterion(a, (2 - 3j) * a)[0, 0] == pytest.approx(1.0, abs=1e-14)
+    assert modal_assurance_criterion([1, 0, 0], [0, 1j, 0])[0, 0] == 0.0
+    b = np.array([0.2, 1.0, 0.1j])
+    expected = abs(np.vdot(a, b)) ** 2 / (np.vdot(a, a).real * np.vdot(b, b).real)
+    mac = modal_assurance_criterion(np.column_stack([a, b]), b)
+    assert mac.shape == (2, 1)
+    assert mac[0, 0] == pytest.approx(expected, rel=1e-13) and mac[1, 0] == pytest.approx(1.0)
+
+
+def test_mac_refuses_mismatched_shapes():
+    with pytest.raises(ValueError, match="shape_a and shape_b"):
+        modal_assurance_criterion(np.ones(3), np.ones(4))
+
+
+# --------------------------------------------------------------------------- per-pole criteria
+
+
+def test_lowest_order_poles_are_unstable_and_say_why():
+    d = stabilization_diagram(make_result({4: [pole(5.0)], 6: [pole(5.0)]}))
+    s, reason, _ = status_of(d, 4, 5.0)
+    assert s is PoleStatus.UNSTABLE and "lowest order" in reason
+    assert status_of(d, 6, 5.0)[0] is PoleStatus.STABLE and status_of(d, 6, 5.0)[1] == ""
+
+
+def test_damping_out_of_range_is_rejected_with_the_value():
+    c = StabilityCriteria()
+    d = stabilization_diagram(make_result({4: [pole(5.0, xi=-0.01), pole(9.0, xi=0.35), pole(12.0, xi=0.19)]}), c)
+    s, reason, _ = status_of(d, 4, 5.0)
+    assert s is PoleStatus.REJECTED and "damping ratio -1 % < 0 %" in reason
+    s, reason, _ = status_of(d, 4, 9.0)
+    assert s is PoleStatus.REJECTED and "damping ratio 35 % > 20 %" in reason
+    assert status_of(d, 4, 12.0)[0] is not PoleStatus.REJECTED   # 19 % <= max_damping_ratio 20 %
+
+
+def test_coefficient_of_variation_above_threshold_is_rejected():
+    c = StabilityCriteria(max_frequency_cov=0.02)
+    poles = {4: [pole(10.0, sf=0.3), pole(20.0, sf=0.3), pole(30.0, sf=float("nan"))]}  # 3 %, 1.5 %, NaN
+    d = stabilization_diagram(make_result(poles), c)
+    s, reason, _ = status_of(d, 4, 10.0)
+    assert s is PoleStatus.REJECTED and "frequency std/f 3 % > 2 %" in reason
+    assert status_of(d, 4, 20.0)[0] is PoleStatus.UNSTABLE   # kept (lowest order), 1.5 % <= 2 %
+    s, reason, _ = status_of(d, 4, 30.0)
+    assert s is PoleStatus.REJECTED and "not finite" in reason
+    # the same poles without the criterion: none rejected for uncertainty
+    d = stabilization_diagram(make_result(poles), max_frequency_cov=None)
+    assert d.count(PoleStatus.REJECTED) == 0
+
+
+def test_all_failing_checks_are_listed_in_the_reason():
+    d = stabilization_diagram(make_result({4: [pole(10.0, xi=-0.02, sf=1.0)]}))
+    reason = status_of(d, 4, 10.0)[1]
+    assert "damping ratio" in reason and "frequency std/f" in reason and "; " in reason
+
+
+# --------------------------------------------------------------------------- between orders
+
+
+def test_relative_frequency_change_threshold():
+    # 10 -> 10.05 Hz is a 0.5 % change (<= 1 %); 20 -> 20.4 Hz is 2 % (> 1 %). Large σ so the σ test passes.
+    d = stabilization_diagram(make_result({
+        4: [pole(10.0, sf=0.1), pole(20.0, shape=SHAPE_B, sf=0.15)],
+        6: [pole(10.05, sf=0.1), pole(20.4, shape=SHAPE_B, sf=0.15)]}))
+    s, _, i = status_of(d, 6, 10.05)
+    assert s is PoleStatus.STABLE and d.frequency_change[i] == pytest.approx(0.005)
+    s, reason, i = status_of(d, 6, 20.4)
+    assert s is PoleStatus.UNSTABLE and d.frequency_change[i] == pytest.approx(0.02)
+    assert "frequency change 2 % > 1 %" in reason and "(vs order 4)" in reason
+
+
+@pytest.mark.parametrize("sigma,k,expected", [
+    (0.01, 2.0, PoleStatus.UNSTABLE),    # |Δf| = 0.05 Hz > 2 * sqrt(2) * 0.01 = 0.028 Hz
+    (0.03, 2.0, PoleStatus.STABLE),      # 0.05 Hz <= 2 * sqrt(2) * 0.03 = 0.085 Hz
+    (0.01, 4.0, PoleStatus.STABLE),      # 0.05 Hz <= 4 * sqrt(2) * 0.01 = 0.057 Hz
+    (0.01, None, PoleStatus.STABLE),     # σ test switched off; 0.5 % <= 1 %
+])
+def test_frequency_change_judged_against_its_standard_deviation(sigma, k, expected):
+    d = stabilization_diagram(make_result({4: [pole(10.0, sf=sigma)], 6: [pole(10.05, sf=sigma)]}),
+                              frequency_std_factor=k)
+    s, reason, i = status_of(d, 6, 10.05)
+    assert s is expected
+    if k is not None:
+        assert d.frequency_change_std[i] == pytest.approx(0.05 / math.hypot(sigma, sigma))
+    if expected is PoleStatus.UNSTABLE:
+        assert "combined std" in reason
+
+
+def test_damping_change_threshold_gives_stable_frequency():
+    # ξ 0.02 -> 0.025 is a 25 % change (> 10 %); 0.02 -> 0.021 is 5 % (<= 10 %).
+    d = stabilization_diagram(make_result({
+        4: [pole(10.0), pole(20.0, shape=SHAPE_B)],
+        6: [pole(10.0, xi=0.025), pole(20.0, xi=0.021, shape=SHAPE_B)]}))
+    s, reason, i = status_of(d, 6, 10.0)
+    assert s is PoleStatus.STABLE_FREQUENCY and "damping change 25 % > 10 %" in reason
+    assert d.damping_change[i] == pytest.approx(0.25)
+    assert status_of(d, 6, 20.0)[0] is PoleStatus.STABLE
+
+
+def test_mac_threshold_gives_stable_frequency():
+    changed = (1.0, 0.5, 0.3)
+    expected_mac = abs(np.vdot(SHAPE_A, changed)) ** 2 / (np.vdot(SHAPE_A, SHAPE_A) * np.vdot(changed, changed))
+    assert 0.7 < expected_mac < 0.98   # 1.16^2 / 1.34^2 = 0.749
+    d = stabilization_diagram(make_result({4: [pole(10.0)], 6: [pole(10.0, shape=changed)]}))
+    s, reason, i = status_of(d, 6, 10.0)
+    assert s is PoleStatus.STABLE_FREQUENCY and f"MAC {expected_mac:.4f} < 0.98" in reason
+    assert d.mac[i] == pytest.approx(expected_mac)
+    assert stabilization_diagram(make_result({4: [pole(10.0)], 6: [pole(10.0, shape=changed)]}),
+                                 min_mac=0.7).status[1] is PoleStatus.STABLE
+
+
+def test_match_is_the_nearest_accepted_pole_of_the_previous_order():
+    # order 4: an accepted pole at 10.0 Hz and a rejected one (negative damping) at 10.02 Hz
+    d = stabilization_diagram(make_result({
+        4: [pole(5.0, shape=SHAPE_B), pole(10.0), pole(10.02, xi=-0.01)],
+        6: [pole(10.02)]}))
+    _, _, i_prev = status_of(d, 4, 10.0)
+    s, _, i = status_of(d, 6, 10.02)
+    assert d.matched_pole[i] == i_prev and s is PoleStatus.STABLE
+
+
+def test_no_accepted_pole_at_previous_order():
+    d = stabilization_diagram(make_result({4: [pole(10.0, xi=-0.01)], 6: [pole(10.0)]}))
+    s, reason, i = status_of(d, 6, 10.0)
+    assert s is PoleStatus.UNSTABLE and "no accepted pole at the previous order 4" in reason
+    assert d.matched_pole[i] == -1 and np.isnan(d.frequency_change[i])
+
+
+def test_without_uncertainty_the_sigma_criteria_are_skipped():
+    # σ would reject (CoV 5 %) and fail the σ test; without uncertainty neither applies
+    poles = {4: [pole(10.0, sf=0.5)], 6: [pole(10.05, sf=0.5)]}
+    d = stabilization_diagram(make_result(poles, with_std=False))
+    assert not d.has_uncertainty and np.all(np.isnan(d.frequency_std))
+    assert status_of(d, 6, 10.05)[0] is PoleStatus.STABLE
+    assert np.all(np.isnan(d.frequency_change_std))
+
+
+def test_orders_cutting_close_singular_values_are_noted():
+    d = stabilization_diagram(make_result({4: [pole(10.0)], 6: [pole(10.0)], 8: [pole(10.0)]},
+                                          close_orders=(6, 8)))
+    assert d.close_singular_value_orders == (6, 8)
+    np.testing.assert_array_equal(d.close_singular_values, [False, True, True])
+
+
+def test_every_non_stable_pole_has_a_reason_and_dataframe_shows_it():
+    pytest.importorskip("pandas")
+    d = stabilization_diagram(make_result({4: [pole(10.0), pole(15.0, xi=-0.1)], 6: [pole(10.5)]}))
+    df = d.to_dataframe()
+    assert list(df["status"]) == ["unstable", "rejected", "unstable"]
+    assert all(df["reason"].str.len() > 0)
+    assert {"order", "frequency_hz", "frequency_std", "damping_ratio", "damping_std", "mac",
+            "mode_shape_y0"} <= set(df.columns)
+
+
+@pytest.mark.parametrize("kwargs,name", [
+    ({"min_mac": 1.5}, "min_mac"), ({"max_frequency_change": -0.1}, "max_frequency_change"),
+    ({"frequency_std_factor": 0.0}, "frequency_std_factor"), ({"max_frequency_cov": -1}, "max_frequency_cov"),
+    ({"min_damping_ratio": 0.3}, "max_damping_ratio"),
+])
+def test_bad_criteria_name_the_parameter(kwargs, name):
+    with pytest.raises(ValueError, match=name):
+        StabilityCriteria(**kwargs)
+
+
+def test_bad_arguments_raise_type_errors():
+    with pytest.raises(TypeError, match="result"):
+        stabilization_diagram({"orders": [2]})
+    with pytest.raises(TypeError, match="min_mac"):
+        StabilityCriteria(min_mac="0.9")
+    with pytest.raises(TypeError, match="diagram"):
+        select_modes([1, 2])
+    with pytest.raises(ValueError, match="distance_threshold"):
+        ClusteringSettings(distance_threshold=0)
+    with pytest.raises(ValueError, match="min_cluster_size"):
+        ClusteringSettings(min_cluster_size=0)
+
+
+# --------------------------------------------------------------------------- mode selection
+
+ORDERS = list(range(2, 21, 2))  # 10 orders
+
+
+def two_modes_and_a_spurious_pole(**pole_kwargs):
+    """Mode A (5 Hz) and mode B (12 Hz) at every order, drifting 0.01 %/order; a spurious pole at
+    8 Hz at orders 10 and 12 only (so stable at order 12 alone)."""
+    poles = {}
+    for j, n in enumerate(ORDERS):
+        poles[n] = [pole(5.0 * (1 + 1e-4 * j), shape=SHAPE_A), pole(12.0 * (1 + 1e-4 * j), shape=SHAPE_B)]
+        if n in (10, 12):
+            poles[n].append(pole(8.0, shape=SHAPE_C))
+    return poles
+
+
+def test_two_modes_selected_and_the_spurious_cluster_dropped():
+    d = stabilization_diagram(make_result(two_modes_and_a_spurious_pole()))
+    sel = d.select_modes()
+    # rule: 9 orders from the first stable one (4) -> ceil(0.25 * 9) = 3 poles needed
+    assert sel.min_cluster_size == 3
+    assert sel.n_modes == 2
+    # the lowest order is unstable by rule, so each mode has one stable pole at orders 4..20
+    np.testing.assert_array_equal(sel.n_poles, [9, 9])
+    np.testing.assert_array_equal(sel.order_min, [4, 4])
+    np.testing.assert_array_equal(sel.order_max, [20, 20])
+    np.testing.assert_array_equal(sel.dropped_n_poles, [1])
+    assert sel.dropped_frequency_hz[0] == pytest.approx(8.0)
+    # representative: member nearest the median frequency (f grows with order -> middle order 12)
+    np.testing.assert_array_equal(sel.representative_order, [12, 12])
+    j12 = ORDERS.index(12)
+    np.testing.assert_allclose(sel.frequency_hz, [5.0 * (1 + 1e-4 * j12), 12.0 * (1 + 1e-4 * j12)], rtol=1e-14)
+    np.testing.assert_allclose(sel.frequency_std, 1e-3 * sel.frequency_hz, rtol=1e-14)
+    # spread: sample std across the members
+    f_members = 5.0 * (1 + 1e-4 * np.arange(1, 10))
+    assert sel.frequency_spread[0] == pytest.approx(np.std(f_members, ddof=1), rel=1e-12)
+    assert sel.damping_spread[0] == 0.0
+    np.testing.assert_allclose(sel.min_mac, 1.0)
+    # every selected pole knows its mode
+    assert np.sum(sel.mode_of_pole == 0) == 9 and np.sum(sel.mode_of_pole == 1) == 9
+
+
+def test_representative_prefers_orders_without_close_singular_values():
+    # orders 4..14 flagged: candidates are orders 16, 18, 20; nearest to the median (order 12) is 16
+    d = stabilization_diagram(make_result(two_modes_and_a_spurious_pole(), close_orders=(4, 6, 8, 10, 12, 14)))
+    sel = d.select_modes()
+    np.testing.assert_array_equal(sel.representative_order, [16, 16])
+
+
+def test_one_pole_per_order_in_a_mode():
+    poles = two_modes_and_a_spurious_pole()
+    poles[10].append(pole(5.0 * (1 + 1e-4 * ORDERS.index(10)) + 2e-4, shape=SHAPE_A))  # a twin at order 10
+    d = stabilization_diagram(make_result(poles))
+    sel = d.select_modes()
+    assert sel.n_modes == 2
+    for members in sel.members:
+        orders = d.order[members]
+        assert orders.size == np.unique(orders).size
+
+
+def test_explicit_min_cluster_size_drops_short_modes():
+    d = stabilization_diagram(make_result(two_modes_and_a_spurious_pole()))
+    sel = d.select_modes(min_cluster_size=10)
+    assert sel.n_modes == 0
+    np.testing.assert_array_equal(np.sort(sel.dropped_n_poles), [1, 9, 9])
+    assert "0 modes" in str(sel)
+
+
+def test_no_poles_give_an_empty_selection():
+    pytest.importorskip("pandas")
+    d = stabilization_diagram(make_result({2: [], 4: [pole(5.0, xi=-0.1)]}))
+    assert d.n_poles == 1 and d.count("rejected") == 1
+    sel = d.select_modes()
+    assert sel.n_modes == 0 and sel.mode_shape.shape == (3, 0)
+    assert sel.to_dict()["modes"] == [] and len(sel.to_dataframe()) == 0
+
+
+def test_selection_without_uncertainty_has_nan_std_and_a_spread():
+    d = stabilization_diagram(make_result(two_modes_and_a_spurious_pole(), with_std=False))
+    sel = d.select_modes()
+    assert sel.n_modes == 2 and not sel.has_uncertainty
+    assert np.all(np.isnan(sel.frequency_std)) and np.all(sel.frequency_spread > 0)
+    assert all(m["frequency_std"] is None for m in sel.to_dict()["modes"])   # JSON null
+    assert " -" in sel.table()
+
+
+def test_selection_is_deterministic():
+    d = stabilization_diagram(make_result(two_modes_and_a_spurious_pole()))
+    a, b = d.select_modes(), d.select_modes()
+    np.testing.assert_array_equal(a.frequency_hz, b.frequency_hz)
+    np.testing.assert_array_equal(a.representative_pole, b.representative_pole)
+
+
+# --------------------------------------------------------------------------- the paper's chain
+
+
+@pytest.fixture(scope="module")
+def chain_100k():
+    return modaluq.simulate(100_000, seed=1)
+
+
+@pytest.fixture(scope="module", params=[False, True], ids=["output-only", "input/output"])
+def chain_selection(request, chain_100k):
+    sim = chain_100k
+    result = modaluq.identify(sim.y, sim.u if request.param else None, fs=sim.fs, block_rows=25,
+                              orders=range(2, 61, 2))
+    diagram = modaluq.stabilization_diagram(result)
+    return sim, diagram, diagram.select_modes()
+
+
+def test_chain_selection_finds_exactly_the_six_true_modes_within_3_sigma(chain_selection):
+    sim, diagram, sel = chain_selection
+    assert sel.n_modes == 6, sel
+    # each true mode pairs with the selected mode nearest in frequency, one to one
+    nearest = [int(np.argmin(np.abs(sel.frequency_hz - f))) for f in sim.frequency_hz]
+    assert nearest == list(range(6))
+    z = np.abs(sel.frequency_hz - sim.frequency_hz) / sel.frequency_std
+    assert np.all(z <= 3.0), z
+    assert np.all(sel.frequency_std > 0) and np.all(np.isfinite(sel.damping_std))
+
+
+def test_chain_selection_reports_consistent_members_and_spread(chain_selection):
+    _, diagram, sel = chain_selection
+    for k, members in enumerate(sel.members):
+        assert all(diagram.status[i] is PoleStatus.STABLE for i in members)
+        assert sel.representative_pole[k] in members
+        assert sel.frequency_spread[k] == pytest.approx(np.std(diagram.frequency_hz[members], ddof=1), rel=1e-12)
+        assert sel.n_poles[k] == members.size >= sel.min_cluster_size
+        i = sel.representative_pole[k]
+        assert sel.frequency_std[k] == diagram.frequency_std[i]
+        np.testing.assert_array_equal(sel.mode_shape[:, k], diagram.mode_shape[:, i])
+
+
+def test_chain_rejected_and_unstable_poles_keep_their_reason(chain_selection):
+    _, diagram, _ = chain_selection
+    stable = diagram.is_status(PoleStatus.STABLE)
+    assert np.all(diagram.reason[stable] == "")
+    assert all(len(r) > 0 for r in diagram.reason[~stable])
+    assert diagram.count(PoleStatus.REJECTED) > 0
+    assert isinstance(diagram, Diagram) and len(diagram) == diagram.n_poles
+
+
+def test_diagram_to_netcdf_round_trip(chain_selection, tmp_path):
+    xr = pytest.importorskip("xarray")
+    pytest.importorskip("netCDF4")
+    _, diagram, sel = chain_selection
+    path = tmp_path / "diagram.nc"
+    diagram.to_xarray(sel).to_netcdf(path, engine="netcdf4")
+    with xr.open_dataset(path) as ds:
+        assert ds.sizes["pole"] == diagram.n_poles and ds.sizes["mode"] == 6
+        np.testing.assert_array_equal(ds["status"].values.astype(str), [s.value for s in diagram.status])
+        np.testing.assert_array_equal(ds["reason"].values.astype(str), diagram.reason)
+        np.testing.assert_allclose(ds["frequency_std"].values, diagram.frequency_std)
+        np.testing.assert_allclose(ds["selected_frequency_hz"].values, sel.frequency_hz)
+        np.testing.assert_allclose(ds["mode_shape_real"].values + 1j * ds["mode_shape_imag"].values,
+                                   diagram.mode_shape)
