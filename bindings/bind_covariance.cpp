@@ -37,7 +37,8 @@ void modaluq::python::bind_covariance(py::module_& m) {
         .def_readonly("R3", &Covariances::R3)
         .def_readonly("R4", &Covariances::R4)
         .def_readonly("blocks", &Covariances::blocks)
-        .def("covariance_factor", &Covariances::covariance_factor);
+        .def("covariance_factor",
+             static_cast<Eigen::MatrixXd (Covariances::*)() const&>(&Covariances::covariance_factor));
 
     py::class_<CovarianceAccumulator>(m, "CovarianceAccumulator")
         .def(py::init<HankelLayout, Index, bool, Index>(), py::arg("layout"), py::arg("block_length"),

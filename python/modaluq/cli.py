@@ -89,11 +89,12 @@ def _parser() -> argparse.ArgumentParser:
     d.add_argument("--n-blocks", type=int, default=50, help="blocks for the uncertainty (default 50)")
     d.set_defaults(func=_demo)
 
-    # Further subcommands register themselves here (one module each).
-    # [identify]
-    from .cli_identify import register; register(sub)  # noqa: E702
-    # [validate]
-    from .validation import cli as validate_cli; validate_cli.register(sub)  # noqa: E702
+    # Further subcommands register themselves (one module each).
+    from .cli_identify import register as register_identify
+    from .validation.cli import register as register_validate
+
+    register_identify(sub)
+    register_validate(sub)
     return p
 
 
