@@ -184,10 +184,10 @@ def adapter_pyoma2(y, u, fs, cfg, step=2):
 
 
 def adapter_koma(y, u, fs, cfg):
+    if cfg["io"]:
+        raise Unsupported("output-only (covssi takes no inputs) and no uncertainty")
     if cfg["unc"]:
         raise Unsupported("no uncertainty (koma.oma.covssi returns poles and shapes only)")
-    if cfg["io"]:
-        raise Unsupported("output-only")
     from koma.oma import covssi
 
     orders = _orders(cfg)
@@ -204,11 +204,11 @@ def adapter_koma(y, u, fs, cfg):
 
 
 def adapter_strid(y, u, fs, cfg):
+    if cfg["io"]:
+        raise Unsupported("CovarianceDrivenStochasticSID is output-only (the IO method, "
+                          "CombinedDeterministicStochasticSID, is data-driven) and no uncertainty")
     if cfg["unc"]:
         raise Unsupported("no uncertainty (CovarianceDrivenStochasticSID gives A, C, G, R0)")
-    if cfg["io"]:
-        raise Unsupported("covariance-driven SID is output-only (its IO method, "
-                          "CombinedDeterministicStochasticSID, is data-driven)")
     import strid
 
     orders = _orders(cfg)
@@ -479,6 +479,30 @@ def versions():
     return out
 
 
+def modaluq_build():
+    """Where the measured modaluq comes from: install time of its extension, checkout commit."""
+    parts = []
+    try:
+        import importlib.util
+
+        spec = importlib.util.find_spec("modaluq._core")
+        if spec and spec.origin:
+            stamp = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime(os.path.getmtime(spec.origin)))
+            parts.append(f"extension built {stamp}")
+    except Exception:
+        pass
+    try:
+        head = subprocess.run(["git", "-C", ROOT, "rev-parse", "--short", "HEAD"],
+                              capture_output=True, text=True).stdout.strip()
+        dirty = subprocess.run(["git", "-C", ROOT, "status", "--porcelain", "--untracked-files=no"],
+                               capture_output=True, text=True).stdout.strip()
+        if head:
+            parts.append(f"checkout {head}" + (" + local changes" if dirty else ""))
+    except OSError:
+        pass
+    return ", ".join(parts)
+
+
 def import_error(tool):
     """Why a peer cannot be imported (None if it can), checked in a subprocess."""
     mod = {"modaluq": "modaluq", "pyOMA2": "pyoma2.algorithms", "koma": "koma.oma",
@@ -560,6 +584,10 @@ def plot_sweeps(sweeps, path, title):
         if pts:
             ax.loglog(*zip(*pts), style, label="with uncertainty" if unc else "no uncertainty")
     ax.set_xlabel("largest model order n_max (orders 2, 4, ..., n_max)")
+    xs = sorted({s["n_max"] for s in sweeps["order"]})
+    ax.set_xticks(xs)
+    ax.set_xticks([], minor=True)
+    ax.set_xticklabels([str(x) for x in xs])
     ax.set_ylabel("CPU s (1 thread)")
     ax.set_title("vs order: 20 ch, N = 1e5, p = q = 20, n_b = 50", fontsize=9)
     ax.grid(True, which="both", alpha=0.3)
@@ -581,8 +609,13 @@ def plot_sweeps(sweeps, path, title):
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
-                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = argparse.ArgumentParser(
+        description=__doc__.split("\n\n")[0],
+        epilog="examples:\n  python bench/run.py\n  python bench/run.py --quick\n"
+               "  python bench/run.py --only S1,U1 --no-peers --no-sweep --repeats 9\n"
+               "configs: " + ", ".join(CONFIGS) + "; tools: " + ", ".join(TOOLS)
+               + "\nsee docs/performance.md",
+        formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--quick", action="store_true",
                     help="modaluq 3 runs, peers 1 run, skip peer runs known to take > 1 min, "
                          "coarser sweep")
@@ -631,6 +664,7 @@ def main(argv=None):
     print(f"python  : {platform.python_version()}, numpy {vers['numpy']}, scipy {vers['scipy']}; "
           f"1 BLAS/OpenMP thread ({', '.join(v + '=1' for v in _THREAD_VARS[:3])})")
     print("versions: " + ", ".join(f"{t} {vers[t] or '(not installed)'}" for t in TOOLS))
+    print(f"modaluq : {modaluq_build()}")
     print(f"command : python bench/run.py {' '.join(argv if argv is not None else sys.argv[1:])}".rstrip())
     print(f"runs    : modaluq median of {rep_mq}, peers median of {rep_peer} "
           f"(once when a run takes > 60 s); timeout {args.timeout:.0f} s wall\n")
@@ -752,6 +786,10 @@ def report(results, names, args, rep_mq):
                 reason = r.get("reason", r.get("status"))
                 rows.append([name, tool, "—", "—", "—", 0, "—", reason])
     print(table(["cfg", "tool", "CPU s", "wall s", "peak MB", "runs", "CPU ÷ modaluq", "modes found / note"], rows))
+    threads = sorted({n for res in results["configs"].values() for r in res.values()
+                      for n in (r.get("blas_threads") or [])})
+    if threads:
+        print(f"\nBLAS threads in the workers (threadpoolctl): {', '.join(map(str, threads))}")
 
     print("\n## modaluq against the issue's targets and this machine's floor\n")
     if floor:

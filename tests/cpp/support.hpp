@@ -3,6 +3,8 @@
 // matrices) and the explicit full uncertainty path (Kronecker Jacobians, Sigma_H formed),
 // against which the efficient production code is checked.
 
+#include "eigen_instances.hpp"
+
 #include <modaluq/modaluq.hpp>
 #include <unsupported/Eigen/MatrixFunctions>
 

@@ -1,4 +1,7 @@
 #include <doctest/doctest.h>
+
+#include "eigen_instances.hpp"
+
 #include <modaluq/modaluq.hpp>
 
 #include <string>

@@ -1,0 +1,2 @@
+#define MODALUQ_TESTS_INSTANTIATE_EIGEN
+#include "eigen_instances.hpp"
