@@ -254,6 +254,31 @@ class Result:
             return pd.DataFrame(columns=["order", "mode", "frequency_hz", "damping_ratio"])
         return pd.concat(frames, ignore_index=True)
 
+    def stabilization_diagram(self, criteria=None, **kwargs):
+        """The stabilization diagram of this run (see :func:`modaluq.stabilization_diagram`)."""
+        from .stabilization import stabilization_diagram
+
+        return stabilization_diagram(self, criteria, **kwargs)
+
+    def select_modes(self, criteria=None, settings=None):
+        """Physical modes chosen automatically from the stable poles (see :func:`modaluq.select_modes`)."""
+        from .stabilization import select_modes
+
+        return select_modes(self.stabilization_diagram(criteria), settings)
+
+    def plot(self, ax=None, *, y=None, criteria=None, select: bool = True, **kwargs):
+        """Draw the stabilization diagram with ±σ_f bars (over the output spectrum when ``y`` is given).
+
+        ``select=True`` also marks the automatically selected modes. Returns the Figure.
+        """
+        diagram = self.stabilization_diagram(criteria)
+        selected = None
+        if select:
+            from .stabilization import select_modes
+
+            selected = select_modes(diagram)
+        return diagram.plot(ax, y=y, selected=selected, **kwargs)
+
     def __str__(self) -> str:
         kind = "input/output" if self.n_inputs else "output-only"
         lines = [

@@ -118,3 +118,23 @@ def test_png_written_and_readable(small_chain, tmp_path):
     assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     img = plt.imread(path)
     assert img.ndim == 3 and img.shape[0] > 100 and img.shape[1] > 100
+
+
+def test_result_plot_draws_the_diagram_with_selected_modes(tmp_path):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import modaluq
+
+    sim = modaluq.simulate(20_000, seed=4)
+    res = modaluq.identify(sim.y, fs=sim.fs, block_rows=20, orders=range(2, 31, 2), n_blocks=20)
+    diagram = res.stabilization_diagram()
+    assert diagram.n_poles == sum(m.n_modes for m in res)
+    fig = res.plot(y=sim.y)
+    out = tmp_path / "d.png"
+    fig.savefig(out)
+    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    # One error bar per pole with a finite sigma, as drawn by Diagram.plot on the same diagram.
+    ref = diagram.plot(y=sim.y, selected=res.select_modes())
+    assert len(fig.axes[0].lines) == len(ref.axes[0].lines)
+    assert len(fig.axes[0].collections) == len(ref.axes[0].collections)
