@@ -125,7 +125,7 @@ inline void eigen_perturbation(const OrderContext& ctx, const Eigen::Ref<const E
 /// Stage 4 for all blocks at once, the production path (equal to eigen_perturbation per
 /// block; tested). The Q matrices of block k are the leading n x n (l x n) blocks of
 /// qa/qb/q4.middleCols(k N, N). Restructured so that the work is a few large GEMMs:
-///   [Z_1; ...; Z_nb] = [Qa_1; ...] [Re phi, Im phi] - ([Qb_1; ...] [Re phi, Im phi]) Lambda   (real)
+///   Z_k = Qa_k [Re phi, Im phi] - (Qb_k [Re phi, Im phi]) Lambda   (real GEMMs)
 ///   M = chi^H W (n x n, once per order),   d lambda_i = M_{k_i,:} Z_i / (chi_i^H phi_i),
 ///   d(C phi_i) = G_i Z_i + Q4 phi_i   with G_i = C V diag(1 / (lambda_i - lambda_j))_{j != k_i} M,
 /// where Z_i (n x nb) gathers column i of every block's Z.
@@ -134,15 +134,14 @@ inline void eigen_perturbation_blocks(const OrderContext& ctx, const Eigen::Matr
                                       std::vector<Eigen::MatrixXcd>& dshape) {
     const Eigenstructure& e = *ctx.eig;
     const Index n = ctx.phi.rows(), nm = ctx.phi.cols(), l = q4.rows();
-    Eigen::MatrixXd qa_s(n * nb, n), qb_s(n * nb, n), q4_s(l * nb, n);
-    for (Index k = 0; k < nb; ++k) {
-        qa_s.middleRows(k * n, n) = qa.block(0, k * N, n, n);
-        qb_s.middleRows(k * n, n) = qb.block(0, k * N, n, n);
-        q4_s.middleRows(k * l, l) = q4.block(0, k * N, l, n);
-    }
     Eigen::MatrixXd ph(n, 2 * nm);
     ph << ctx.phi.real(), ctx.phi.imag();
-    const Eigen::MatrixXd za = qa_s * ph, zb = qb_s * ph, z4 = q4_s * ph;
+    Eigen::MatrixXd za(n * nb, 2 * nm), zb(n * nb, 2 * nm), z4(l * nb, 2 * nm);
+    for (Index k = 0; k < nb; ++k) {  // one GEMM per block, straight from the order-N storage
+        za.middleRows(k * n, n).noalias() = qa.block(0, k * N, n, n) * ph;
+        zb.middleRows(k * n, n).noalias() = qb.block(0, k * N, n, n) * ph;
+        z4.middleRows(k * l, l).noalias() = q4.block(0, k * N, l, n) * ph;
+    }
 
     // M^T = W chi-bar = R^{-1} R^{-T} (chi^H)^T.
     Eigen::MatrixXcd mt = e.left_h.transpose();
