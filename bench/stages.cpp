@@ -64,6 +64,7 @@ static void run(const char* name, Index l, Index n, Index p, Index nmax, Index n
         t_prop = since(t0);
     }
     t0 = clk::now();
+    o.threads = 1;
     for (Index k : o.orders) {
         const StateSpace ss = re.system(k);
         detail::Eigenstructure eig;

@@ -38,6 +38,7 @@ void modaluq::python::bind_identify(py::module_& m) {
         .def_readwrite("uncertainty", &IdentifyOptions::uncertainty)
         .def_readwrite("demean", &IdentifyOptions::demean)
         .def_readwrite("input_rcond", &IdentifyOptions::input_rcond)
+        .def_readwrite("threads", &IdentifyOptions::threads)
         .def("validate", &IdentifyOptions::validate)
         .def("layout", &IdentifyOptions::layout, py::arg("n_outputs"), py::arg("n_inputs"));
 

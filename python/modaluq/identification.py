@@ -82,7 +82,7 @@ def _sampling_frequency(fs) -> float:
 
 
 def core_options(*, fs, block_rows, past_block_rows=None, orders, n_blocks=50, references=None,
-                 uncertainty=True, demean=True, input_rcond=1e-10) -> "_core.IdentifyOptions":
+                 uncertainty=True, demean=True, input_rcond=1e-10, threads=1) -> "_core.IdentifyOptions":
     """Check the settings of :func:`identify` and return them as the core's options struct."""
     o = _core.IdentifyOptions()
     o.fs = _sampling_frequency(fs)
@@ -96,6 +96,7 @@ def core_options(*, fs, block_rows, past_block_rows=None, orders, n_blocks=50, r
     if not isinstance(input_rcond, numbers.Real) or not (0 <= float(input_rcond) < 1):
         raise ValueError(f"input_rcond must be a number in [0, 1); got {input_rcond!r}")
     o.input_rcond = float(input_rcond)
+    o.threads = _integer("threads", threads, minimum=1)
     o.validate()
     return o
 
@@ -332,6 +333,7 @@ def _settings(o, n_outputs) -> dict:
         "uncertainty": o.uncertainty,
         "demean": o.demean,
         "input_rcond": o.input_rcond,
+        "threads": o.threads,
     }
 
 
@@ -342,7 +344,8 @@ def _warn(result: Result, stacklevel: int = 3) -> None:
 
 def identify(y, u=None, *, fs: float, block_rows: int, past_block_rows: int | None = None,
              orders: int | Sequence[int], n_blocks: int = 50, references: Sequence[int] | None = None,
-             uncertainty: bool = True, demean: bool = True, input_rcond: float = 1e-10) -> Result:
+             uncertainty: bool = True, demean: bool = True, input_rcond: float = 1e-10,
+             threads: int = 1) -> Result:
     """Identify modes by covariance-driven SSI, with their standard deviations.
 
     Parameters
@@ -372,6 +375,9 @@ def identify(y, u=None, *, fs: float, block_rows: int, past_block_rows: int | No
     input_rcond : float
         Eigenvalues of the input covariance R3 below ``input_rcond`` times the largest are dropped
         from its pseudo-inverse; ``Result.input_rank_deficient`` reports when that happens.
+    threads : int
+        Threads for the per-block and per-order work (default 1). The result does not depend on
+        it; 2 on a 2-core machine roughly halves the time of a large stabilization diagram.
 
     Returns
     -------
@@ -389,7 +395,7 @@ def identify(y, u=None, *, fs: float, block_rows: int, past_block_rows: int | No
     """
     o = core_options(fs=fs, block_rows=block_rows, past_block_rows=past_block_rows, orders=orders,
                      n_blocks=n_blocks, references=references, uncertainty=uncertainty, demean=demean,
-                     input_rcond=input_rcond)
+                     input_rcond=input_rcond, threads=threads)
     y = as_samples(y, "y")
     u = as_samples(u, "u", allow_none=True)
     if u is not None and u.shape[0] != y.shape[0]:

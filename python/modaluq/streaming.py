@@ -92,12 +92,14 @@ class CovarianceAccumulator:
         """The covariances R1..R4 (and per-block covariances) of everything pushed so far."""
         return self._acc.finish(bool(with_blocks))
 
-    def identify(self, *, fs: float, orders, uncertainty: bool = True, input_rcond: float = 1e-10) -> Result:
+    def identify(self, *, fs: float, orders, uncertainty: bool = True, input_rcond: float = 1e-10,
+                 threads: int = 1) -> Result:
         """Identify from everything pushed so far (see :func:`modaluq.identify`)."""
         layout = self._acc.layout
         o = core_options(fs=fs, block_rows=layout.block_rows, past_block_rows=layout.past_block_rows or None,
                          orders=orders, n_blocks=2, references=list(layout.references) or None,
-                         uncertainty=uncertainty, demean=self._acc.demean, input_rcond=input_rcond)
+                         uncertainty=uncertainty, demean=self._acc.demean, input_rcond=input_rcond,
+                         threads=threads)
         cov = self._acc.finish(bool(uncertainty))
         o.n_blocks = max(int(cov.n_blocks), 2)
         ident = _core.identify_covariances(cov, o)

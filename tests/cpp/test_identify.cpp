@@ -67,6 +67,25 @@ TEST_CASE("all orders come from one SVD and match separate runs") {
     for (Index i = 0; i < m.n_modes(); ++i) CHECK(m.eigenvalue(i).imag() > 0);
 }
 
+TEST_CASE("threads do not change the result") {
+    const Sim s = simulate(3, {0, 1, 2}, 6000, 21, true, 0.2, 0.05);
+    auto o = options(s.fs, 5, 6, {2, 4, 6, 8, 10}, true);
+    const auto one = modaluq::identify(s.y, s.u, o);
+    for (Index t : {2, 3, 16}) {
+        CAPTURE(t);
+        o.threads = t;
+        const auto many = modaluq::identify(s.y, s.u, o);
+        REQUIRE(many.modes.size() == one.modes.size());
+        for (size_t k = 0; k < one.modes.size(); ++k) {
+            CHECK(many.modes[k].order == one.modes[k].order);
+            CHECK((many.modes[k].frequency_hz - one.modes[k].frequency_hz).cwiseAbs().maxCoeff() == 0.0);
+            CHECK((many.modes[k].covariance - one.modes[k].covariance).cwiseAbs().maxCoeff() == 0.0);
+        }
+    }
+    o.threads = 0;
+    CHECK_THROWS_WITH_AS(modaluq::identify(s.y, s.u, o), "threads must be >= 1, got 0", modaluq::invalid_argument);
+}
+
 TEST_CASE("identification from an accumulator fed in chunks equals the batch call") {
     const Sim s = simulate(3, {0, 2}, 5000, 4, true, 0.3, 0.05);
     auto o = options(s.fs, 5, 5, {6}, true, 20);

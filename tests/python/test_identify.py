@@ -212,3 +212,14 @@ def test_version_agrees():
     from importlib.metadata import version
 
     assert modaluq.__version__ == _core.__version__ == version("modaluq")
+
+
+def test_threads_give_the_same_result(chain):
+    kw = dict(fs=chain.fs, block_rows=6, orders=range(2, 13, 2), n_blocks=20)
+    one = modaluq.identify(chain.y, chain.u, **kw)
+    two = modaluq.identify(chain.y, chain.u, threads=2, **kw)
+    for a, b in zip(one, two):
+        np.testing.assert_array_equal(a.frequency_hz, b.frequency_hz)
+        np.testing.assert_array_equal(a.covariance, b.covariance)
+    with pytest.raises(ValueError, match="threads must be >= 1"):
+        modaluq.identify(chain.y, chain.u, threads=0, **kw)

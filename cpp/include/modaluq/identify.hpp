@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "covariance.hpp"
+#include "detail/parallel.hpp"
 #include "modal.hpp"
 #include "realization.hpp"
 #include "subspace.hpp"
@@ -31,6 +32,9 @@ struct IdentifyOptions {
     bool uncertainty = true;        ///< propagate the covariance; false skips all of it
     bool demean = true;             ///< remove each channel's mean over the record
     double input_rcond = 1e-10;     ///< R3 eigenvalues below this times the largest are dropped
+    /// Threads for the per-block and per-order work (1 = the calling thread only). Results do
+    /// not depend on it. Each thread's linear algebra stays single-threaded.
+    Index threads = 1;
 
     void validate() const {
         detail::require(std::isfinite(fs) && fs > 0.0, "fs must be a finite sampling frequency > 0 Hz, got ", fs);
@@ -40,6 +44,7 @@ struct IdentifyOptions {
         for (Index n : orders) detail::require(n >= 1, "orders must be >= 1, got ", n);
         if (uncertainty) detail::require(n_blocks >= 2, "n_blocks must be >= 2, got ", n_blocks);
         detail::require(input_rcond >= 0.0 && input_rcond < 1.0, "input_rcond must be in [0, 1), got ", input_rcond);
+        detail::require(threads >= 1, "threads must be >= 1, got ", threads);
     }
 
     HankelLayout layout(Index n_outputs, Index n_inputs) const {
@@ -120,20 +125,21 @@ inline Identification identify_with_factor(const Covariances& cov, Eigen::Matrix
                 " parameters of a mode (need at least ", 3 + 2 * L.n_outputs, "); the standard deviations are still valid"));
         // T_H lives only while the propagator takes what it needs from it.
         prop = std::make_unique<UncertaintyPropagator>(re, propagate_to_subspace(sub, cov, std::move(t_r)),
-                                                       L.rows_past());
+                                                       L.rows_past(), options.threads);
     }
-    out.modes.reserve(options.orders.size());
-    Index short_blocks = 0;
-    for (Index n : options.orders) {
-        const StateSpace ss = re.system(n);
+    // Orders are independent: highest (most expensive) first, on options.threads threads.
+    const Index n_orders = static_cast<Index>(options.orders.size());
+    out.modes.resize(options.orders.size());
+    detail::parallel_for(n_orders, options.threads, [&](Index i) {
+        const Index k = n_orders - 1 - i;
+        const StateSpace ss = re.system(options.orders[k]);
         detail::Eigenstructure eig;
         Modes m = modes_from_system(ss, options.fs, prop ? &eig : nullptr);
-        if (prop) {
-            prop->apply(m, eig, ss, options.fs, block_seconds);
-            short_blocks += m.block_too_short.count();
-        }
-        out.modes.push_back(std::move(m));
-    }
+        if (prop) prop->apply(m, eig, ss, options.fs, block_seconds);
+        out.modes[k] = std::move(m);
+    });
+    Index short_blocks = 0;
+    for (const Modes& m : out.modes) short_blocks += m.block_too_short.count();
     if (short_blocks > 0)
         out.warnings.push_back(detail::concat(
             short_blocks, " pole(s) decay more slowly than the blocks are long (block of ", block_seconds,

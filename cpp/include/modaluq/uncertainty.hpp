@@ -20,6 +20,7 @@
 #include <limits>
 #include <vector>
 
+#include "detail/parallel.hpp"
 #include "modal.hpp"
 #include "realization.hpp"
 
@@ -204,7 +205,9 @@ public:
     /// @param re   the realization (SVD of H, Gamma at n_max)
     /// @param t_h  T_H, (a b) x n_b: column k is vec dH^k (column-major)
     /// @param b    columns of H
-    UncertaintyPropagator(const Realization& re, const Eigen::MatrixXd& t_h, Index b) : re_(re), nb_(t_h.cols()) {
+    /// @param threads  threads for the per-block work (results do not depend on it)
+    UncertaintyPropagator(const Realization& re, const Eigen::MatrixXd& t_h, Index b, Index threads = 1)
+        : re_(re), nb_(t_h.cols()) {
         const Index a = re.U().rows(), n = re.max_order(), l = re.n_outputs();
         const Index n_sigma = std::min<Index>(n + 1, re.singular_values().size());
         detail::require(t_h.rows() == a * b, "T_H must have a*b rows");
@@ -212,14 +215,14 @@ public:
         qa_.resize(n, n * nb_);
         qb_.resize(n, n * nb_);
         q4_.resize(l, n * nb_);
-        Eigen::VectorXd ds;
-        for (Index k = 0; k < nb_; ++k) {
+        detail::parallel_for(nb_, threads, [&](Index k) {  // blocks write disjoint columns
             Eigen::Map<const Eigen::MatrixXd> dh(t_h.col(k).data(), a, b);
+            Eigen::VectorXd ds;
             const Eigen::MatrixXd dg = detail::gamma_perturbation(re, dh, n, &ds, n_sigma);
             dsigma_.col(k) = ds;
             detail::q_matrices(re.observability(), dg, l, qa_.middleCols(k * n, n), qb_.middleCols(k * n, n),
                                q4_.middleCols(k * n, n));
-        }
+        });
     }
 
     Index n_blocks() const { return nb_; }
