@@ -8,9 +8,10 @@
 Every measurement runs in a fresh subprocess with ONE BLAS/OpenMP thread, on data simulated
 once per configuration by the parent and stored as .npy files (so data generation neither
 costs time nor inflates the memory peak of the tool being measured).  A worker loads the
-data, imports its tool, records ru_maxrss as the baseline, runs the tool ``repeats`` times
-(time.process_time and time.perf_counter around each call), then reports the median CPU and
-wall seconds and the peak resident memory above the baseline.  After the timed runs, the
+data, imports its tool and runs it ``repeats`` times (time.process_time and time.perf_counter
+around each call), then reports the median CPU and wall seconds and the memory a run adds:
+the peak RSS during the run (VmHWM, reset before each run through /proc/self/clear_refs)
+minus the RSS just before it, largest over the runs.  After the timed runs, the
 result of the last run is checked against the true modes of the simulated structure (see
 ``check_modes``), so no tool is timed doing the wrong thing.
 
@@ -274,27 +275,37 @@ def _import_numpy():
     np = numpy
 
 
-def _maxrss_mb():
-    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # Linux: kB
-
-
-def _rss_mb():
-    with open("/proc/self/statm") as fh:
-        return int(fh.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2 ** 20
+def _status_mb(field):
+    """A memory field of /proc/self/status (VmRSS, VmHWM) in MB, or None."""
+    try:
+        with open("/proc/self/status") as fh:
+            for line in fh:
+                if line.startswith(field + ":"):
+                    return int(line.split()[1]) / 1024.0
+    except OSError:
+        pass
+    return None
 
 
 def _reset_peak():
-    """Reset the peak RSS (Linux >= 4.0); returns the baseline to subtract from the peak.
+    """Reset this process's peak RSS; returns (baseline MB, peak reader).
 
-    With the reset, the baseline is the current RSS; without it, ru_maxrss so far (a peak
-    during imports or data loading then hides a smaller peak of the tool).
+    Linux >= 4.0: writing 5 to /proc/self/clear_refs resets VmHWM to the current RSS, so the
+    peak of a run minus the RSS just before it is what that run added.  ru_maxrss is no use
+    here: after fork + exec it starts at the parent's RSS (getrusage reports the larger of
+    the two), and it cannot be reset.  Without the reset, the fallback baseline is the peak
+    so far (an earlier peak then hides a smaller one of the tool).
     """
     try:
         with open("/proc/self/clear_refs", "w") as fh:
             fh.write("5")
-        return _rss_mb(), "reset"
+        base, peak = _status_mb("VmRSS"), _status_mb("VmHWM")
+        if base is not None and peak is not None and peak - base < 1.0:
+            return base, lambda: _status_mb("VmHWM")
     except OSError:
-        return _maxrss_mb(), "maxrss"
+        pass
+    maxrss = lambda: resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # noqa: E731
+    return maxrss(), maxrss
 
 
 def worker_measure(spec):
@@ -323,18 +334,19 @@ def worker_measure(spec):
         pass
     import gc
 
-    gc.collect()
-    base, how = _reset_peak()
-    cpu, wall = [], []
+    cpu, wall, mem, rss = [], [], [], []
     res = None
     for _ in range(spec["repeats"]):
         res = None
+        gc.collect()
+        base, peak = _reset_peak()  # per run: memory a previous run kept is not counted
+        rss.append(base)
         c0, w0 = time.process_time(), time.perf_counter()
         res = run()
         cpu.append(time.process_time() - c0)
         wall.append(time.perf_counter() - w0)
-    out.update(status="ok", cpu=cpu, wall=wall, mem_mb=max(0.0, _maxrss_mb() - base),
-               base_mb=base, mem_baseline=how)
+        mem.append(max(0.0, peak() - base))
+    out.update(status="ok", cpu=cpu, wall=wall, mem_mb=max(mem), mem_runs=mem, rss_before=rss)
     if spec.get("check", True):
         ok, text, stds = check_modes(extract, res, cfg, meta)
         out.update(check_ok=ok, check=text, stds=stds)
@@ -768,8 +780,9 @@ def report(results, names, args, rep_mq):
                      f"{why}; orders {check_orders(c)}"])
     print(table(["cfg", "data", "N", "block rows p=q", "orders", "n_b", "uncertainty", "mode check"], rows))
 
-    print("\n## Results (CPU and wall seconds: medians; memory: peak RSS above the baseline "
-          "after imports and data load)\n")
+    print("\n## Results (CPU and wall seconds: medians; peak MB: the most any run added to the "
+          "resident memory, peak RSS during the run minus RSS just before it, data and imports "
+          "already loaded)\n")
     rows = []
     for name in names:
         res = results["configs"].get(name, {})
