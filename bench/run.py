@@ -128,7 +128,7 @@ def _orders(cfg):
     return list(range(2, cfg["n_max"] + 1, 2))
 
 
-def adapter_modaluq(y, u, fs, cfg):
+def adapter_modaluq(y, u, fs, cfg, threads=1):
     import modaluq
 
     orders = _orders(cfg)
@@ -136,7 +136,7 @@ def adapter_modaluq(y, u, fs, cfg):
     def run():
         return modaluq.identify(y, u if cfg["io"] else None, fs=fs, block_rows=cfg["p"],
                                 orders=orders, n_blocks=cfg["n_blocks"],
-                                uncertainty=cfg["unc"])
+                                uncertainty=cfg["unc"], threads=threads)
 
     def extract(res, n):
         m = res.at_order(n)
@@ -144,7 +144,8 @@ def adapter_modaluq(y, u, fs, cfg):
         return m.frequency_hz, m.damping_ratio, std
 
     settings = (f"identify(block_rows={cfg['p']}, orders=range(2, {cfg['n_max'] + 1}, 2), "
-                f"n_blocks={cfg['n_blocks']}, uncertainty={cfg['unc']})")
+                f"n_blocks={cfg['n_blocks']}, uncertainty={cfg['unc']}"
+                + (f", threads={threads})" if threads != 1 else ")"))
     return run, extract, settings
 
 
@@ -231,7 +232,9 @@ def adapter_strid(y, u, fs, cfg):
                           f"orders 2..{cfg['n_max']} step 2")
 
 
-ADAPTERS = {"modaluq": adapter_modaluq, "pyOMA2": adapter_pyoma2,
+ADAPTERS = {"modaluq": adapter_modaluq,
+            "modaluq (threads=2)": lambda *a: adapter_modaluq(*a, threads=2),
+            "pyOMA2": adapter_pyoma2,
             "pyOMA2 (step=1)": lambda *a: adapter_pyoma2(*a, step=1),
             "koma": adapter_koma, "strid": adapter_strid}
 
@@ -719,6 +722,8 @@ def main(argv=None):
         for name in names:
             cfg = CONFIGS[name]
             row_tools = list(tools)
+            if cfg["unc"] and (os.cpu_count() or 1) >= 2:  # BLAS stays at 1 thread; ours at 2
+                row_tools.insert(1, "modaluq (threads=2)")
             if "pyOMA2" in tools and name == "U1" and not args.quick:
                 row_tools.insert(row_tools.index("pyOMA2") + 1, "pyOMA2 (step=1)")
             res_cfg = {}
@@ -735,7 +740,7 @@ def main(argv=None):
                     res_cfg[tool] = {"status": "skipped",
                                      "reason": "(skipped with --quick: > 1 min a run)"}
                     continue
-                reps = rep_mq if tool == "modaluq" else (1 if slow else rep_peer)
+                reps = rep_mq if base_tool == "modaluq" else (1 if slow else rep_peer)
                 log(f"{name}: {tool} x{reps} ...")
                 spec = {"kind": "measure", "tool": tool, "cfg": cfg, "data": paths[name],
                         "repeats": reps}

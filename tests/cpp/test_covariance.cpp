@@ -63,6 +63,36 @@ TEST_CASE("batch covariances equal the explicit data-matrix definition") {
     }
 }
 
+TEST_CASE("segmented lag sums equal the direct lag sums and their definition") {
+    for (const Index d : {1, 2, 3, 5}) {
+        for (const Index lag : {0, 1, 7, 30}) {
+            const Index n = 500;
+            const MatrixXd x = MatrixXd::Random(d, n + lag);
+            // Definition: sum_c [x_{c+l} x_c^T | x_{c+l}] over base times [off, off + nc).
+            const Index off = 3, nc = n - 17;
+            MatrixXd expect = MatrixXd::Zero((lag + 1) * d, d + 1);
+            for (Index c = off; c < off + nc; ++c)
+                for (Index l = 0; l <= lag; ++l) {
+                    expect.block(l * d, 0, d, d) += x.col(c + l) * x.col(c).transpose();
+                    expect.block(l * d, d, d, 1) += x.col(c + l);
+                }
+            MatrixXd direct = MatrixXd::Zero((lag + 1) * d, d + 1);
+            modaluq::detail::add_lag_sums_direct(x.data(), d, lag, off, nc, direct);
+            CHECK(rel(direct, expect) < 1e-13);
+            // Segment lengths dividing nc, leaving a remainder, longer than the lag, and so long
+            // that fewer than two segments fit (direct fallback); 0 = automatic choice.
+            for (const Index seg : {0, 1, 2, 7, 40, 300}) {
+                MatrixXd got = MatrixXd::Zero((lag + 1) * d, d + 1);
+                modaluq::detail::add_lag_sums(x.data(), d, lag, off, nc, got, seg);
+                CAPTURE(d);
+                CAPTURE(lag);
+                CAPTURE(seg);
+                CHECK(rel(got, expect) < 1e-13);
+            }
+        }
+    }
+}
+
 TEST_CASE("any chunking gives the batch result") {
     const Sim s = simulate(3, {0, 1, 2}, 2300, 11, true, 0.3, 0.05);
     const auto L = layout(3, 1, 4, 5, {0, 2});

@@ -192,12 +192,17 @@ TEST_CASE("stage d lambda, d shape: the batched all-blocks path equals the per-b
         const MatrixXd G = re.observability();
         std::mt19937_64 rng(3);
         std::normal_distribution<double> g01;
-        MatrixXd qa(N, N * nb), qb(N, N * nb), q4(l, N * nb);
+        modaluq::detail::BlockQ q(nb, N, l);
+        std::vector<MatrixXd> qa(nb, MatrixXd(N, N)), qb(nb, MatrixXd(N, N)), q4(nb, MatrixXd(l, N));
         for (Index k = 0; k < nb; ++k) {
             MatrixXd dG(G.rows(), N);
             for (Index i = 0; i < dG.size(); ++i) dG(i) = g01(rng);
-            modaluq::detail::q_matrices(G, dG, l, qa.middleCols(k * N, N), qb.middleCols(k * N, N),
-                                        q4.middleCols(k * N, N));
+            q.set(k, G, dG);
+            modaluq::detail::q_matrices(G, dG, l, qa[k], qb[k], q4[k]);
+            // The interleaved storage returns each block's matrices unchanged.
+            CHECK(MatrixXd(q.qa_block(k)) == qa[k]);
+            CHECK(MatrixXd(q.qb_block(k)) == qb[k]);
+            CHECK(MatrixXd(q.q4_block(k)) == q4[k]);
         }
         for (Index n : {4, 6}) {  // order n uses the leading blocks of the order-N matrices
             CAPTURE(n);
@@ -207,13 +212,13 @@ TEST_CASE("stage d lambda, d shape: the batched all-blocks path equals the per-b
             const modaluq::detail::OrderContext ctx(eig, ss, re);
             MatrixXcd dlam;
             std::vector<MatrixXcd> dshape;
-            modaluq::detail::eigen_perturbation_blocks(ctx, qa, qb, q4, N, nb, dlam, dshape);
+            modaluq::detail::eigen_perturbation_blocks(ctx, q, dlam, dshape);
             REQUIRE(dlam.rows() == m.n_modes());
             for (Index k = 0; k < nb; ++k) {
                 Eigen::VectorXcd dl(m.n_modes());
                 MatrixXcd ds(l, m.n_modes());
-                modaluq::detail::eigen_perturbation(ctx, qa.block(0, k * N, n, n), qb.block(0, k * N, n, n),
-                                                    q4.block(0, k * N, l, n), dl, ds);
+                modaluq::detail::eigen_perturbation(ctx, qa[k].topLeftCorner(n, n), qb[k].topLeftCorner(n, n),
+                                                    q4[k].leftCols(n), dl, ds);
                 CHECK((dlam.col(k) - dl).norm() < 1e-10 * dl.norm());
                 for (Index i = 0; i < m.n_modes(); ++i)
                     CHECK((dshape[i].col(k) - ds.col(i)).norm() < 1e-10 * ds.col(i).norm());

@@ -73,6 +73,46 @@ inline void q_matrices(const Eigen::MatrixXd& gamma, const Eigen::MatrixXd& dgam
     q4 = dgamma.topRows(l);
 }
 
+/// Q matrices of every block at n_max, stored so that one order's leading blocks of all
+/// blocks are one contiguous sub-matrix: row k + n_b i of `qa` is row i of block k's Qa.
+/// Order n then needs qa.topLeftCorner(n_b n, n): stage 4 is one GEMM for all blocks
+/// instead of n_b small ones.
+struct BlockQ {
+    Index nb = 0, n_max = 0, l = 0;
+    Eigen::MatrixXd qa;  ///< (n_b n_max) x n_max: Q3 + Q2^T
+    Eigen::MatrixXd qb;  ///< (n_b n_max) x n_max: Q1 + Q1^T
+    Eigen::MatrixXd q4;  ///< (n_b l) x n_max: dC
+    using View = Eigen::Map<Eigen::MatrixXd, 0, Eigen::Stride<Eigen::Dynamic, Eigen::Dynamic>>;
+    using ConstView = Eigen::Map<const Eigen::MatrixXd, 0, Eigen::Stride<Eigen::Dynamic, Eigen::Dynamic>>;
+
+    BlockQ() = default;
+    BlockQ(Index n_blocks, Index n_max_, Index n_outputs)
+        : nb(n_blocks), n_max(n_max_), l(n_outputs), qa(nb * n_max, n_max), qb(nb * n_max, n_max),
+          q4(nb * l, n_max) {}
+
+    /// Block k's matrices (n_max x n_max, l x n_max) as strided views.
+    ConstView qa_block(Index k) const { return view(qa, k, n_max); }
+    ConstView qb_block(Index k) const { return view(qb, k, n_max); }
+    ConstView q4_block(Index k) const { return view(q4, k, l); }
+
+    /// Store block k's Q matrices from its dGamma (blocks write disjoint elements).
+    void set(Index k, const Eigen::MatrixXd& gamma, const Eigen::MatrixXd& dgamma) {
+        Eigen::MatrixXd a(n_max, n_max), b(n_max, n_max), c(l, n_max);
+        q_matrices(gamma, dgamma, l, a, b, c);
+        View(qa.data() + k, n_max, n_max, stride(qa)) = a;
+        View(qb.data() + k, n_max, n_max, stride(qb)) = b;
+        View(q4.data() + k, l, n_max, stride(q4)) = c;
+    }
+
+private:
+    Eigen::Stride<Eigen::Dynamic, Eigen::Dynamic> stride(const Eigen::MatrixXd& m) const {
+        return {m.rows(), nb};
+    }
+    ConstView view(const Eigen::MatrixXd& m, Index k, Index rows) const {
+        return ConstView(m.data() + k, rows, n_max, stride(m));
+    }
+};
+
 /// What one order's eigenstructure needs for stage 4.
 struct OrderContext {
     Eigen::MatrixXcd phi;        ///< n x nm right eigenvectors of the reported modes
@@ -124,25 +164,22 @@ inline void eigen_perturbation(const OrderContext& ctx, const Eigen::Ref<const E
 }
 
 /// Stage 4 for all blocks at once, the production path (equal to eigen_perturbation per
-/// block; tested). The Q matrices of block k are the leading n x n (l x n) blocks of
-/// qa/qb/q4.middleCols(k N, N). Restructured so that the work is a few large GEMMs:
-///   Z_k = Qa_k [Re phi, Im phi] - (Qb_k [Re phi, Im phi]) Lambda   (real GEMMs)
+/// block; tested). Restructured so that the work is three GEMMs for all blocks:
+///   Z_k = Qa_k [Re phi, Im phi] - (Qb_k [Re phi, Im phi]) Lambda   (leading n x n of Qa_k)
 ///   M = chi^H W (n x n, once per order),   d lambda_i = M_{k_i,:} Z_i / (chi_i^H phi_i),
 ///   d(C phi_i) = G_i Z_i + Q4 phi_i   with G_i = C V diag(1 / (lambda_i - lambda_j))_{j != k_i} M,
-/// where Z_i (n x nb) gathers column i of every block's Z.
-inline void eigen_perturbation_blocks(const OrderContext& ctx, const Eigen::MatrixXd& qa, const Eigen::MatrixXd& qb,
-                                      const Eigen::MatrixXd& q4, Index N, Index nb, Eigen::MatrixXcd& dlambda,
+/// where Z_i (n x nb) gathers column i of every block's Z. With BlockQ's layout, column i of
+/// the stacked product read as an n_b x n matrix is Z_i^T: no gathering copy.
+inline void eigen_perturbation_blocks(const OrderContext& ctx, const BlockQ& q, Eigen::MatrixXcd& dlambda,
                                       std::vector<Eigen::MatrixXcd>& dshape) {
     const Eigenstructure& e = *ctx.eig;
-    const Index n = ctx.phi.rows(), nm = ctx.phi.cols(), l = q4.rows();
+    const Index n = ctx.phi.rows(), nm = ctx.phi.cols(), l = q.l, nb = q.nb;
     Eigen::MatrixXd ph(n, 2 * nm);
     ph << ctx.phi.real(), ctx.phi.imag();
-    Eigen::MatrixXd za(n * nb, 2 * nm), zb(n * nb, 2 * nm), z4(l * nb, 2 * nm);
-    for (Index k = 0; k < nb; ++k) {  // one GEMM per block, straight from the order-N storage
-        za.middleRows(k * n, n).noalias() = qa.block(0, k * N, n, n) * ph;
-        zb.middleRows(k * n, n).noalias() = qb.block(0, k * N, n, n) * ph;
-        z4.middleRows(k * l, l).noalias() = q4.block(0, k * N, l, n) * ph;
-    }
+    Eigen::MatrixXd za(nb * n, 2 * nm), zb(nb * n, 2 * nm), z4(nb * l, 2 * nm);
+    za.noalias() = q.qa.topLeftCorner(nb * n, n) * ph;
+    zb.noalias() = q.qb.topLeftCorner(nb * n, n) * ph;
+    z4.noalias() = q.q4.leftCols(n) * ph;
 
     // M^T = W chi-bar = R^{-1} R^{-T} (chi^H)^T.
     Eigen::MatrixXcd mt = e.left_h.transpose();
@@ -150,27 +187,26 @@ inline void eigen_perturbation_blocks(const OrderContext& ctx, const Eigen::Matr
     ctx.rn.triangularView<Eigen::Upper>().solveInPlace(mt);
     const Eigen::MatrixXcd M = mt.transpose();
 
+    using Cols = Eigen::Map<const Eigen::MatrixXd>;
     dlambda.resize(nm, nb);
     dshape.assign(nm, Eigen::MatrixXcd(l, nb));
-    Eigen::MatrixXcd zi(n, nb), g(l, n);
+    Eigen::MatrixXcd zt(nb, n), g(l, n);
     Eigen::VectorXcd c(n);
     for (Index i = 0; i < nm; ++i) {
         const cd lam = ctx.lambda(i);
-        for (Index k = 0; k < nb; ++k) {
-            const auto a_re = za.block(k * n, i, n, 1), a_im = za.block(k * n, nm + i, n, 1);
-            const auto b_re = zb.block(k * n, i, n, 1), b_im = zb.block(k * n, nm + i, n, 1);
-            // Z = (a_re + i a_im) - lambda (b_re + i b_im)
-            zi.col(k).real() = a_re - lam.real() * b_re + lam.imag() * b_im;
-            zi.col(k).imag() = a_im - lam.real() * b_im - lam.imag() * b_re;
-            dshape[i].col(k).real() = z4.block(k * l, i, l, 1);
-            dshape[i].col(k).imag() = z4.block(k * l, nm + i, l, 1);
-        }
+        const Cols a_re(za.col(i).data(), nb, n), a_im(za.col(nm + i).data(), nb, n);
+        const Cols b_re(zb.col(i).data(), nb, n), b_im(zb.col(nm + i).data(), nb, n);
+        // Z_i^T = (a_re + i a_im) - lambda (b_re + i b_im)
+        zt.real() = a_re - lam.real() * b_re + lam.imag() * b_im;
+        zt.imag() = a_im - lam.real() * b_im - lam.imag() * b_re;
         const Index ki = e.kept[i];
-        dlambda.row(i).noalias() = M.row(ki) * zi;
+        dlambda.row(i).noalias() = M.row(ki) * zt.transpose();
         dlambda.row(i) /= ctx.den(i);
+        dshape[i].real() = Cols(z4.col(i).data(), nb, l).transpose();
+        dshape[i].imag() = Cols(z4.col(nm + i).data(), nb, l).transpose();
         for (Index j = 0; j < n; ++j) c(j) = (j == ki) ? cd(0.0) : cd(1.0) / (lam - e.values(j));
         g.noalias() = (ctx.cv * c.asDiagonal()) * M;
-        dshape[i].noalias() += g * zi;
+        dshape[i].noalias() += g * zt.transpose();
     }
 }
 
@@ -212,16 +248,13 @@ public:
         const Index n_sigma = std::min<Index>(n + 1, re.singular_values().size());
         detail::require(t_h.rows() == a * b, "T_H must have a*b rows");
         dsigma_.resize(n_sigma, nb_);
-        qa_.resize(n, n * nb_);
-        qb_.resize(n, n * nb_);
-        q4_.resize(l, n * nb_);
+        q_ = detail::BlockQ(nb_, n, l);
         detail::parallel_for(nb_, threads, [&](Index k) {  // blocks write disjoint columns
             Eigen::Map<const Eigen::MatrixXd> dh(t_h.col(k).data(), a, b);
             Eigen::VectorXd ds;
             const Eigen::MatrixXd dg = detail::gamma_perturbation(re, dh, n, &ds, n_sigma);
             dsigma_.col(k) = ds;
-            detail::q_matrices(re.observability(), dg, l, qa_.middleCols(k * n, n), qb_.middleCols(k * n, n),
-                               q4_.middleCols(k * n, n));
+            q_.set(k, re.observability(), dg);
         });
     }
 
@@ -232,7 +265,7 @@ public:
     void apply(Modes& modes, const detail::Eigenstructure& eig, const StateSpace& ss, double fs,
                double block_seconds) const {
         using detail::cd;
-        const Index n = modes.order, nm = modes.n_modes(), l = re_.n_outputs(), N = re_.max_order();
+        const Index n = modes.order, nm = modes.n_modes(), l = re_.n_outputs();
         const Index np = 2 + 2 * l;
         modes.frequency_std.resize(nm);
         modes.damping_std.resize(nm);
@@ -252,7 +285,7 @@ public:
         const detail::OrderContext ctx(eig, ss, re_);
         Eigen::MatrixXcd dlam;
         std::vector<Eigen::MatrixXcd> dshape;
-        detail::eigen_perturbation_blocks(ctx, qa_, qb_, q4_, N, nb_, dlam, dshape);
+        detail::eigen_perturbation_blocks(ctx, q_, dlam, dshape);
         for (Index i = 0; i < nm; ++i) {
             const Eigen::VectorXcd raw = ss.C.cast<cd>() * ctx.phi.col(i);
             const Eigen::MatrixXd ut = detail::modal_perturbation(ctx.lambda(i), fs, raw, modes.reference_component(i),
@@ -273,9 +306,7 @@ private:
     const Realization& re_;
     Index nb_;
     Eigen::MatrixXd dsigma_;  ///< d sigma_j per block, j < n_max + 1
-    Eigen::MatrixXd qa_;      ///< Q3 + Q2^T per block: n_max x (n_max n_b)
-    Eigen::MatrixXd qb_;      ///< Q1 + Q1^T per block
-    Eigen::MatrixXd q4_;      ///< dC per block: l x (n_max n_b)
+    detail::BlockQ q_;        ///< Q1..Q4 of every block at n_max
 };
 
 }  // namespace modaluq
