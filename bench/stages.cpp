@@ -5,6 +5,7 @@
 #include <chrono>
 #include <cstdio>
 #include <random>
+#include <string>
 
 using namespace modaluq;
 using clk = std::chrono::steady_clock;
@@ -79,8 +80,10 @@ static void run(const char* name, Index l, Index n, Index p, Index nmax, Index n
                 t_svd, t_th, t_prop, t_orders, t_all);
 }
 
-int main() {
+// Usage: stages [U3]   (U3 adds ~15 s and ~1 GB)
+int main(int argc, char** argv) {
     run("S1", 3, 1000000, 40, 100, 50, false);
     run("U1", 3, 100000, 40, 100, 50, true);
     run("U2", 20, 100000, 20, 100, 50, true);
+    if (argc > 1 && std::string(argv[1]) == "U3") run("U3", 20, 1000000, 40, 200, 100, true);
 }

@@ -249,7 +249,7 @@ public:
         detail::require(t_h.rows() == a * b, "T_H must have a*b rows");
         dsigma_.resize(n_sigma, nb_);
         q_ = detail::BlockQ(nb_, n, l);
-        detail::parallel_for(nb_, threads, [&](Index k) {  // blocks write disjoint columns
+        detail::parallel_for(nb_, threads, [&](Index k) {  // blocks write disjoint elements
             Eigen::Map<const Eigen::MatrixXd> dh(t_h.col(k).data(), a, b);
             Eigen::VectorXd ds;
             const Eigen::MatrixXd dg = detail::gamma_perturbation(re, dh, n, &ds, n_sigma);
