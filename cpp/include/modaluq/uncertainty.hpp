@@ -187,11 +187,25 @@ inline void eigen_perturbation_blocks(const OrderContext& ctx, const BlockQ& q, 
     ctx.rn.triangularView<Eigen::Upper>().solveInPlace(mt);
     const Eigen::MatrixXcd M = mt.transpose();
 
+    // G_i for every mode in one complex GEMM: rows i l .. i l + l - 1 of
+    // [C V diag(c_1); C V diag(c_2); ...] M (l-row products one by one run at a fraction of
+    // the rate when l is small).
+    Eigen::MatrixXcd cvc(nm * l, n);
+    for (Index i = 0; i < nm; ++i) {
+        const Index ki = e.kept[i];
+        for (Index j = 0; j < n; ++j) {
+            auto col = cvc.block(i * l, j, l, 1);
+            if (j == ki) col.setZero();
+            else col = ctx.cv.col(j) * (cd(1.0) / (ctx.lambda(i) - e.values(j)));
+        }
+    }
+    Eigen::MatrixXcd g_all(nm * l, n);
+    g_all.noalias() = cvc * M;
+
     using Cols = Eigen::Map<const Eigen::MatrixXd>;
     dlambda.resize(nm, nb);
     dshape.assign(nm, Eigen::MatrixXcd(l, nb));
-    Eigen::MatrixXcd zt(nb, n), g(l, n);
-    Eigen::VectorXcd c(n);
+    Eigen::MatrixXcd zt(nb, n);
     for (Index i = 0; i < nm; ++i) {
         const cd lam = ctx.lambda(i);
         const Cols a_re(za.col(i).data(), nb, n), a_im(za.col(nm + i).data(), nb, n);
@@ -204,9 +218,7 @@ inline void eigen_perturbation_blocks(const OrderContext& ctx, const BlockQ& q, 
         dlambda.row(i) /= ctx.den(i);
         dshape[i].real() = Cols(z4.col(i).data(), nb, l).transpose();
         dshape[i].imag() = Cols(z4.col(nm + i).data(), nb, l).transpose();
-        for (Index j = 0; j < n; ++j) c(j) = (j == ki) ? cd(0.0) : cd(1.0) / (lam - e.values(j));
-        g.noalias() = (ctx.cv * c.asDiagonal()) * M;
-        dshape[i].noalias() += g * zt.transpose();
+        dshape[i].noalias() += g_all.middleRows(i * l, l) * zt.transpose();
     }
 }
 
