@@ -120,13 +120,14 @@ public:
         // then reused and stays in cache, instead of a copy of the whole push (a batch push
         // of 10^6 samples spent a quarter of its time writing and faulting in that copy).
         const Index l = layout_.n_outputs, m = layout_.n_inputs;
+        Eigen::MatrixXd work;
         for (Index c0 = 0; c0 < n; c0 += kPiece) {
             const Index nn = std::min(kPiece, n - c0), nt = tail_.cols();
-            work_.resize(d_, nt + nn);
-            work_.leftCols(nt) = tail_;
-            work_.block(0, nt, l, nn) = y.middleCols(c0, nn).colwise() - shift_.head(l);
-            if (m > 0) work_.block(l, nt, m, nn) = u.middleCols(c0, nn).colwise() - shift_.tail(m);
-            append_shifted(work_);
+            work.resize(d_, nt + nn);
+            work.leftCols(nt) = tail_;
+            work.block(0, nt, l, nn) = y.middleCols(c0, nn).colwise() - shift_.head(l);
+            if (m > 0) work.block(l, nt, m, nn) = u.middleCols(c0, nn).colwise() - shift_.tail(m);
+            append_shifted(work);
         }
     }
 
@@ -266,7 +267,6 @@ private:
     std::map<Index, Window> windows_;     // keyed by boundary sample b = k N_b
     Eigen::MatrixXd head_;                // first min(L, n) shifted samples
     Eigen::MatrixXd tail_;                // last min(L, n) shifted samples (pending base times)
-    Eigen::MatrixXd work_;                // scratch for push (no state between calls)
 
     bool same_layout(const HankelLayout& o) const {
         return o.n_outputs == layout_.n_outputs && o.n_inputs == layout_.n_inputs &&
