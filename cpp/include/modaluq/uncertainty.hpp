@@ -99,18 +99,20 @@ struct BlockQ {
     void set(Index k, const Eigen::MatrixXd& gamma, const Eigen::MatrixXd& dgamma) {
         Eigen::MatrixXd a(n_max, n_max), b(n_max, n_max), c(l, n_max);
         q_matrices(gamma, dgamma, l, a, b, c);
-        View(qa.data() + k, n_max, n_max, stride(qa)) = a;
-        View(qb.data() + k, n_max, n_max, stride(qb)) = b;
-        View(q4.data() + k, l, n_max, stride(q4)) = c;
+        view(qa, k, n_max) = a;
+        view(qb, k, n_max) = b;
+        view(q4, k, l) = c;
     }
 
 private:
+    /// Block k of m (rows x n_max): every n_b-th row from row k.
     Eigen::Stride<Eigen::Dynamic, Eigen::Dynamic> stride(const Eigen::MatrixXd& m) const {
         return {m.rows(), nb};
     }
     ConstView view(const Eigen::MatrixXd& m, Index k, Index rows) const {
         return ConstView(m.data() + k, rows, n_max, stride(m));
     }
+    View view(Eigen::MatrixXd& m, Index k, Index rows) { return View(m.data() + k, rows, n_max, stride(m)); }
 };
 
 /// What one order's eigenstructure needs for stage 4.
