@@ -23,7 +23,7 @@ and docs/performance.md):
             + t_svd(a x b)                                  numpy SVD of H, measured
             + sum_n t_eig(n x n)                            numpy eig at every order, measured
             + [2 n_b (3 a pm b + a (pm)^2)] / F             IO projection of every block (IO only)
-            + [10 a b n_max n_b + 6 a n_max^2 n_b
+            + [8 a b n_max n_b + 8 a n_max^2 n_b
                + 8 n_b sum_n n^2 (n/2)] / F                 propagation (uncertainty only)
 
 with L = p + q - 1 lags, d channels (outputs + inputs), a = p l, b = q r, F the dgemm rate
@@ -398,8 +398,9 @@ def worker_floor(spec):
         t_eig = _best(lambda: [np.linalg.eig(M_) for M_ in mats], 3)
         t_io = 2.0 * nb * (3 * a * p * m * b + a * (p * m) ** 2) / rate if (cfg["io"] and cfg["unc"]) else 0.0
         if cfg["unc"]:
-            t_dg = 10.0 * a * b * n_max * nb / rate
-            t_q = 6.0 * a * n_max ** 2 * nb / rate
+            # dH V, U^T (dH V), U_n^T dH, (U_n^T dH) V; then the fused Q1..Q3 (uncertainty.hpp QStage)
+            t_dg = 8.0 * a * b * n_max * nb / rate
+            t_q = 8.0 * a * n_max ** 2 * nb / rate
             t_ord = 8.0 * nb * sum(k_ ** 2 * (k_ / 2) for k_ in orders) / rate
         else:
             t_dg = t_q = t_ord = 0.0
@@ -504,6 +505,9 @@ def modaluq_build():
         if spec and spec.origin:
             stamp = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime(os.path.getmtime(spec.origin)))
             parts.append(f"extension built {stamp}")
+        from modaluq import _core
+
+        parts.append("large products through " + ("OpenBLAS" if getattr(_core, "uses_blas", False) else "Eigen"))
     except Exception:
         pass
     try:
@@ -831,7 +835,7 @@ def report(results, names, args, rep_mq):
     print("\nfloor = max(2·N·(L+1)·d² / F, 8·N·d / B) [covariance lag products, L = p+q-1, d = channels]"
           "\n      + t(numpy SVD of the a×b matrix H) + Σ_n t(numpy eig of n×n) [measured]"
           "\n      + 2·n_b·(3·a·pm·b + a·(pm)²) / F [IO: projecting the future inputs out of every block]"
-          "\n      + (10·a·b·n_max·n_b + 6·a·n_max²·n_b + 8·n_b·Σ_n n²·(n/2)) / F"
+          "\n      + (8·a·b·n_max·n_b + 8·a·n_max²·n_b + 8·n_b·Σ_n n²·(n/2)) / F"
           "\n        [uncertainty: ΔΓ for n_max singular vectors, Q1..Q3, per mode of every order]"
           "\n  with F the dgemm rate and B the copy bandwidth measured above.")
 

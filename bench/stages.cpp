@@ -1,5 +1,6 @@
 // Time per stage of the C++ core on the benchmark configurations (no Python).
 // Build: g++ -O3 -march=native -DNDEBUG -std=c++17 -I cpp/include -I /usr/include/eigen3 bench/stages.cpp
+//        [-DMODALUQ_USE_BLAS -lopenblas]   (large products through OpenBLAS; run with OPENBLAS_NUM_THREADS=1)
 #include <modaluq/modaluq.hpp>
 
 #include <chrono>
@@ -66,18 +67,21 @@ static void run(const char* name, Index l, Index n, Index p, Index nmax, Index n
     }
     t0 = clk::now();
     o.threads = 1;
+    double t_eig = 0;
     for (Index k : o.orders) {
+        const auto te = clk::now();
         const StateSpace ss = re.system(k);
         detail::Eigenstructure eig;
         Modes m = modes_from_system(ss, o.fs, prop ? &eig : nullptr);
+        t_eig += since(te);
         if (prop) prop->apply(m, eig, ss, o.fs, 100.0);
     }
     t_orders = since(t0);
     t0 = clk::now();
     identify(y, Eigen::MatrixXd(), o);
     const double t_all = since(t0);
-    std::printf("%-3s cov %.3f  svd %.3f  T_H %.3f  dGamma+Q %.3f  orders %.3f | identify() %.3f s\n", name, t_cov,
-                t_svd, t_th, t_prop, t_orders, t_all);
+    std::printf("%-3s cov %.3f  svd %.3f  T_H %.3f  dGamma+Q %.3f  orders %.3f (eig %.3f) | identify() %.3f s\n",
+                name, t_cov, t_svd, t_th, t_prop, t_orders, t_eig, t_all);
 }
 
 // Usage: stages [U3]   (U3 adds ~15 s and ~1 GB)

@@ -4,6 +4,7 @@
 
 #include <cstdint>
 
+#include <modaluq/detail/gemm.hpp>
 #include <modaluq/errors.hpp>
 #include <modaluq/version.hpp>
 
@@ -14,6 +15,8 @@ namespace py = pybind11;
 PYBIND11_MODULE(_core, m) {
     m.doc() = "modaluq C++ core (covariance-driven SSI with analytic uncertainty)";
     m.attr("__version__") = modaluq::version;
+    // Whether the core's large products go to a BLAS in this build (detail/gemm.hpp).
+    m.attr("uses_blas") = modaluq::detail::gemm_uses_blas();
 
     // invalid_argument derives from std::invalid_argument, which pybind11 maps to ValueError.
     static py::exception<modaluq::numerical_error> numerical(m, "NumericalError", PyExc_ArithmeticError);

@@ -6,9 +6,10 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 JOBS=${JOBS:-2}
 
-if ! dpkg -s libeigen3-dev doctest-dev >/dev/null 2>&1; then
+# OpenBLAS is optional for the library; the tests and the Python module use it when present.
+if ! dpkg -s libeigen3-dev doctest-dev libopenblas-dev >/dev/null 2>&1; then
   export DEBIAN_FRONTEND=noninteractive
-  apt-get update -q && apt-get install -y -q --no-install-recommends libeigen3-dev doctest-dev
+  apt-get update -q && apt-get install -y -q --no-install-recommends libeigen3-dev doctest-dev libopenblas-dev
 fi
 python3 -m pip install -q --upgrade pip >/dev/null
 python3 -m pip install -q ".[all]"

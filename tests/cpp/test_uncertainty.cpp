@@ -109,6 +109,36 @@ TEST_CASE("stage dGamma: SVD-basis solve equals B_j^+ C_j and finite differences
     }
 }
 
+TEST_CASE("stages dGamma + Q fused (QStage) equal q_matrices of gamma_perturbation") {
+    for (bool io : {false, true})
+        for (Index past : {5, 3}) {  // H wider than tall, and taller than wide
+            CAPTURE(io);
+            CAPTURE(past);
+            Case c = make_case(io);
+            c.o.past_block_rows = past;
+            c.cov = modaluq::compute_covariances(c.s.y, io ? c.s.u : MatrixXd(), c.o.layout(2, io ? 1 : 0), 20);
+            const Index n = 6, l = 2;
+            const auto sub = modaluq::subspace_matrix(c.cov);
+            const modaluq::Realization re(sub.H, l, n);
+            const MatrixXd TH = modaluq::propagate_to_subspace(sub, c.cov, c.cov.covariance_factor());
+            const Index n_sigma = std::min<Index>(n + 1, re.singular_values().size());
+            const modaluq::detail::QStage stage(re, n_sigma);
+            for (Index k : {0, 7, 19}) {
+                const Eigen::Map<const MatrixXd> dH(TH.col(k).data(), sub.H.rows(), sub.H.cols());
+                VectorXd ds_ref;
+                const MatrixXd dg = modaluq::detail::gamma_perturbation(re, dH, n, &ds_ref, n_sigma);
+                MatrixXd qa(n, n), qb(n, n), q4(l, n), qa_f(n, n), qb_f(n, n), q4_f(l, n);
+                modaluq::detail::q_matrices(re.observability(), dg, l, qa, qb, q4);
+                VectorXd ds(n_sigma);
+                stage.compute(dH, qa_f, qb_f, q4_f, ds);
+                CHECK(rel(qa_f, qa) < 1e-10);
+                CHECK(rel(qb_f, qb) < 1e-10);
+                CHECK(rel(q4_f, q4) < 1e-10);
+                CHECK(rel(ds, ds_ref) < 1e-12);
+            }
+        }
+}
+
 TEST_CASE("stage dA, dC: explicit J_{A,Gamma} (with the residual term) equals finite differences") {
     const Case c = make_case(false);
     const Index n = 6, l = 2;

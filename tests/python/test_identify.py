@@ -214,6 +214,12 @@ def test_version_agrees():
     assert modaluq.__version__ == _core.__version__ == version("modaluq")
 
 
+def test_build_says_whether_products_go_to_a_blas():
+    # True when CMake found OpenBLAS at build time (tests/run.sh installs it); the oracle
+    # tests then check the BLAS path, ctest checks both paths of gemm().
+    assert isinstance(_core.uses_blas, bool)
+
+
 def test_threads_give_the_same_result(chain):
     kw = dict(fs=chain.fs, block_rows=6, orders=range(2, 13, 2), n_blocks=20)
     one = modaluq.identify(chain.y, chain.u, **kw)

@@ -9,6 +9,7 @@
 #include <limits>
 
 #include "covariance.hpp"
+#include "detail/gemm.hpp"
 
 namespace modaluq {
 
@@ -56,7 +57,9 @@ inline Eigen::MatrixXd propagate_to_subspace(const SubspaceMatrix& s, const Cova
     const HankelLayout& L = c.layout;
     const Index a = L.rows_future(), b = L.rows_past(), pm = L.rows_input();
     Eigen::MatrixXd t_h(a * b, t_r.cols());
-    Eigen::MatrixXd dh(a, b);
+    Eigen::MatrixXd dh(a, b), dr3m(pm, b);
+    using detail::gemm;
+    using detail::Op;
     for (Index k = 0; k < t_r.cols(); ++k) {
         const double* col = t_r.col(k).data();
         Eigen::Map<const Eigen::MatrixXd> dr1(col, a, b);
@@ -64,9 +67,10 @@ inline Eigen::MatrixXd propagate_to_subspace(const SubspaceMatrix& s, const Cova
         Eigen::Map<const Eigen::MatrixXd> dr3(col + a * b + a * pm, pm, pm);
         Eigen::Map<const Eigen::MatrixXd> dr4(col + a * b + a * pm + pm * pm, b, pm);
         dh = dr1;
-        dh.noalias() -= dr2 * s.input_transfer;
-        dh.noalias() += s.input_gain * (dr3 * s.input_transfer);
-        dh.noalias() -= s.input_gain * dr4.transpose();
+        gemm(dh, dr2, Op::N, s.input_transfer, Op::N, -1.0, 1.0);
+        gemm(dr3m, dr3, Op::N, s.input_transfer, Op::N);
+        gemm(dh, s.input_gain, Op::N, dr3m, Op::N, 1.0, 1.0);
+        gemm(dh, s.input_gain, Op::N, dr4, Op::T, -1.0, 1.0);
         t_h.col(k) = Eigen::Map<const Eigen::VectorXd>(dh.data(), a * b);
     }
     return t_h;

@@ -10,6 +10,7 @@
 ///     (the singular system B_j [du; dv] = C_j vec dH of uq-math §5.1 solved in the SVD
 ///     basis, where it is diagonal: same minimum-norm solution, no b x b solve per j)
 ///  3. Q1..Q4 once at n_max; order n uses their leading n x n blocks    q_matrices
+///     (the production path fuses 2 and 3 in QStage, which never forms dGamma)
 ///  4. per order and block: dA phi, d lambda, d phi, d(C phi)           eigen_perturbation
 ///  5. per mode: f, xi and the normalised mode shape                    modal_perturbation
 
@@ -20,6 +21,7 @@
 #include <limits>
 #include <vector>
 
+#include "detail/gemm.hpp"
 #include "detail/parallel.hpp"
 #include "modal.hpp"
 #include "realization.hpp"
@@ -29,32 +31,54 @@ namespace detail {
 
 using cd = std::complex<double>;
 
-/// Stage 2: dGamma (a x n) for one perturbation dH of H, and d sigma_j for j < n_sigma.
-/// du_j = U (Omega_j - U^T dH v_j / s_j) + dH v_j / s_j with
-/// Omega_ij = (s_j u_i^T dH v_j + s_i u_j^T dH v_i) / (s_j^2 - s_i^2), Omega_jj = 0;
-/// d gamma_j = u_j d s_j / (2 sqrt s_j) + sqrt(s_j) du_j  (uq-math §5.1-5.3).
-inline Eigen::MatrixXd gamma_perturbation(const Realization& re, const Eigen::Ref<const Eigen::MatrixXd>& dh,
-                                          Index n, Eigen::VectorXd* dsigma = nullptr, Index n_sigma = 0) {
+/// dH in the SVD basis, what stage 2 needs (uq-math §5.1-5.3) for singular vectors j < n:
+/// P = dH V_{n1} (dH v_j, n1 >= n columns), Ua = U^T P (u_i^T dH v_j), and Omega (r x n) with
+/// du_j = U Omega_j + dH v_j / s_j:
+/// Omega_ij = (s_j Ua_ij + s_i u_j^T dH v_i) / (s_j^2 - s_i^2) for i != j, Omega_jj = 0, then
+/// minus Ua_ij / s_j (the part of dH v_j / s_j inside span U).
+struct SvdPerturbation {
+    Eigen::MatrixXd P, Ua, omega;
+};
+
+inline SvdPerturbation svd_perturbation(const Realization& re, const Eigen::Ref<const Eigen::MatrixXd>& dh, Index n,
+                                        Index n1) {
     const Eigen::MatrixXd& U = re.U();
     const Eigen::MatrixXd& V = re.V();
     const Eigen::VectorXd& s = re.singular_values();
-    const Index r = s.size();
-    const Index n1 = std::max(n, std::min(n_sigma, r));
-    const Eigen::MatrixXd P = dh * V.leftCols(n1);                     // dH v_j
-    const Eigen::MatrixXd Ua = U.transpose() * P;                       // u_i^T dH v_j
-    const Eigen::MatrixXd Ub = (U.leftCols(n).transpose() * dh) * V;    // u_j^T dH v_i
-    if (dsigma) *dsigma = Ua.diagonal().head(std::min(n_sigma, r));
-    Eigen::MatrixXd omega(r, n);
+    const Index r = s.size(), a = U.rows();
+    SvdPerturbation sp;
+    sp.P.resize(a, n1);
+    sp.Ua.resize(r, n1);
+    Eigen::MatrixXd W(n, dh.cols()), Ub(n, V.cols());
+    gemm(sp.P, dh, Op::N, V.leftCols(n1), Op::N);  // dH v_j
+    gemm(sp.Ua, U, Op::T, sp.P, Op::N);            // u_i^T dH v_j
+    gemm(W, U.leftCols(n), Op::T, dh, Op::N);
+    gemm(Ub, W, Op::N, V, Op::N);                  // u_j^T dH v_i
+    sp.omega.resize(r, n);
     for (Index j = 0; j < n; ++j) {
         for (Index i = 0; i < r; ++i)
-            omega(i, j) = (i == j) ? 0.0 : (s(j) * Ua(i, j) + s(i) * Ub(j, i)) / (s(j) * s(j) - s(i) * s(i));
-        omega.col(j) -= Ua.col(j) / s(j);
+            sp.omega(i, j) = (i == j) ? 0.0 : (s(j) * sp.Ua(i, j) + s(i) * Ub(j, i)) / (s(j) * s(j) - s(i) * s(i));
+        sp.omega.col(j) -= sp.Ua.col(j) / s(j);
     }
+    return sp;
+}
+
+/// Stage 2: dGamma (a x n) for one perturbation dH of H, and d sigma_j for j < n_sigma:
+/// dGamma = (U Omega + P_n S^-1) S^{1/2} + U_n diag(d s_j / (2 sqrt s_j)), d s_j = Ua_jj
+/// (uq-math §5.1-5.3). The reference for the fused QStage below.
+inline Eigen::MatrixXd gamma_perturbation(const Realization& re, const Eigen::Ref<const Eigen::MatrixXd>& dh,
+                                          Index n, Eigen::VectorXd* dsigma = nullptr, Index n_sigma = 0) {
+    const Eigen::MatrixXd& U = re.U();
+    const Eigen::VectorXd& s = re.singular_values();
+    const Index r = s.size();
+    const SvdPerturbation sp = svd_perturbation(re, dh, n, std::max(n, std::min(n_sigma, r)));
+    if (dsigma) *dsigma = sp.Ua.diagonal().head(std::min(n_sigma, r));
     const Eigen::ArrayXd sq = s.head(n).array().sqrt();
-    Eigen::MatrixXd dg = U * omega;
-    dg += P.leftCols(n) * s.head(n).cwiseInverse().asDiagonal();
+    Eigen::MatrixXd dg(U.rows(), n);
+    gemm(dg, U, Op::N, sp.omega, Op::N);
+    dg += sp.P.leftCols(n) * s.head(n).cwiseInverse().asDiagonal();
     dg = dg * sq.matrix().asDiagonal();
-    dg += U.leftCols(n) * (Ua.diagonal().head(n).array() / (2.0 * sq)).matrix().asDiagonal();
+    dg += U.leftCols(n) * (sp.Ua.diagonal().head(n).array() / (2.0 * sq)).matrix().asDiagonal();
     return dg;
 }
 
@@ -66,12 +90,83 @@ inline void q_matrices(const Eigen::MatrixXd& gamma, const Eigen::MatrixXd& dgam
     const Index rows = gamma.rows() - l;
     const auto g_up = gamma.topRows(rows), g_dw = gamma.bottomRows(rows);
     const auto d_up = dgamma.topRows(rows), d_dw = dgamma.bottomRows(rows);
-    const Eigen::MatrixXd q1 = g_up.transpose() * d_up;
-    qa.noalias() = g_up.transpose() * d_dw;
-    qa.noalias() += d_up.transpose() * g_dw;
+    Eigen::MatrixXd q1(gamma.cols(), dgamma.cols());
+    gemm(q1, g_up, Op::T, d_up, Op::N);
+    gemm(qa, g_up, Op::T, d_dw, Op::N);
+    gemm(qa, d_up, Op::T, g_dw, Op::N, 1.0, 1.0);
     qb = q1 + q1.transpose();
     q4 = dgamma.topRows(l);
 }
+
+/// Stages 2 and 3 fused, the production path (equal to q_matrices of gamma_perturbation;
+/// tested): the Q matrices at n_max straight from the SVD-basis perturbation, without
+/// forming dGamma. With Gamma = U_n S^{1/2} and dGamma = D S^{1/2} + U_n E,
+/// D = U Omega + P_n S^-1, E = diag(d s_j / (2 sqrt s_j)), for row selections X, Y:
+///   Gamma_X^T dGamma_Y = S^{1/2} [(K_XY Omega + U_{n,X}^T P_{n,Y} S^-1) S^{1/2} + K_XY[:, :n] E],
+/// K_XY = U_{n,X}^T U_Y computed once. For X = Y = up (all rows but the last l), U^T U = I
+/// gives K = [I 0] - U_{n,bot}^T U_bot over the last l rows only, so Q1 is almost free and
+/// the a x r x n product U Omega is not needed: 8 n^2 a flops per block instead of 14.
+class QStage {
+public:
+    QStage(const Realization& re, Index n_sigma) : re_(re), n_(re.max_order()), l_(re.n_outputs()), n_sigma_(n_sigma) {
+        const Eigen::MatrixXd& U = re.U();
+        const Index rows = U.rows() - l_, r = U.cols();
+        k_.resize(2 * n_, r);  // [K_dw,up; K_up,dw]
+        gemm(k_.topRows(n_), U.block(l_, 0, rows, n_), Op::T, U.topRows(rows), Op::N);
+        gemm(k_.bottomRows(n_), U.topLeftCorner(rows, n_), Op::T, U.bottomRows(rows), Op::N);
+        gram_up_ = Eigen::MatrixXd::Identity(n_, n_);
+        gemm(gram_up_, U.bottomLeftCorner(l_, n_), Op::T, U.bottomLeftCorner(l_, n_), Op::N, -1.0, 1.0);
+    }
+
+    /// Qa = Q3 + Q2^T, Qb = Q1 + Q1^T (n x n), Q4 = dC (l x n) of one block from its dH, and
+    /// d sigma_j for j < n_sigma.
+    void compute(const Eigen::Ref<const Eigen::MatrixXd>& dh, Eigen::Ref<Eigen::MatrixXd> qa,
+                 Eigen::Ref<Eigen::MatrixXd> qb, Eigen::Ref<Eigen::MatrixXd> q4,
+                 Eigen::Ref<Eigen::VectorXd> dsigma) const {
+        const Eigen::MatrixXd& U = re_.U();
+        const Eigen::VectorXd& s = re_.singular_values();
+        const Index n = n_, l = l_, r = s.size(), rows = U.rows() - l;
+        const SvdPerturbation sp = svd_perturbation(re_, dh, n, std::max(n, std::min(n_sigma_, r)));
+        dsigma = sp.Ua.diagonal().head(dsigma.size());
+        const Eigen::VectorXd sinv = s.head(n).cwiseInverse(), sq = s.head(n).cwiseSqrt();
+        const Eigen::VectorXd e = sp.Ua.diagonal().head(n).cwiseQuotient(2.0 * sq);
+
+        // Rows of D: the first l (dC) and the last l (for Q1).
+        Eigen::MatrixXd d_top(l, n), d_bot(l, n);
+        gemm(d_top, U.topRows(l), Op::N, sp.omega, Op::N);
+        d_top += sp.P.topLeftCorner(l, n) * sinv.asDiagonal();
+        gemm(d_bot, U.bottomRows(l), Op::N, sp.omega, Op::N);
+        d_bot += sp.P.bottomLeftCorner(l, n) * sinv.asDiagonal();
+
+        // X_up,up = Omega[:n] + Ua[:n, :n] S^-1 - U_{n,bot}^T D_bot
+        Eigen::MatrixXd x1 = sp.omega.topRows(n) + sp.Ua.topLeftCorner(n, n) * sinv.asDiagonal();
+        gemm(x1, U.bottomLeftCorner(l, n), Op::T, d_bot, Op::N, -1.0, 1.0);
+        // [X_dw,up; X_up,dw] = [K_dw,up; K_up,dw] Omega + [U_{n,dw}^T P_{n,up}; U_{n,up}^T P_{n,dw}] S^-1
+        Eigen::MatrixXd x23(2 * n, n), pp(n, n);
+        gemm(x23, k_, Op::N, sp.omega, Op::N);
+        gemm(pp, U.block(l, 0, rows, n), Op::T, sp.P.topLeftCorner(rows, n), Op::N);
+        x23.topRows(n) += pp * sinv.asDiagonal();
+        gemm(pp, U.topLeftCorner(rows, n), Op::T, sp.P.block(l, 0, rows, n), Op::N);
+        x23.bottomRows(n) += pp * sinv.asDiagonal();
+
+        // Q_XY = S^{1/2} (X_XY S^{1/2} + Gram_XY E)
+        const auto finish = [&](const Eigen::MatrixXd& x, const Eigen::Ref<const Eigen::MatrixXd>& gram) {
+            return Eigen::MatrixXd(sq.asDiagonal() * (x * sq.asDiagonal() + gram * e.asDiagonal()));
+        };
+        const Eigen::MatrixXd q1 = finish(x1, gram_up_);
+        const Eigen::MatrixXd q2 = finish(x23.topRows(n), k_.topLeftCorner(n, n));
+        const Eigen::MatrixXd q3 = finish(x23.bottomRows(n), k_.bottomLeftCorner(n, n));
+        qa = q3 + q2.transpose();
+        qb = q1 + q1.transpose();
+        q4 = d_top * sq.asDiagonal() + U.topLeftCorner(l, n) * e.asDiagonal();
+    }
+
+private:
+    const Realization& re_;
+    Index n_, l_, n_sigma_;
+    Eigen::MatrixXd k_;        ///< [U_{n,dw}^T U_up; U_{n,up}^T U_dw], 2 n x r
+    Eigen::MatrixXd gram_up_;  ///< U_{n,up}^T U_{n,up} = I - U_{n,bot}^T U_{n,bot}
+};
 
 /// Q matrices of every block at n_max, stored so that one order's leading blocks of all
 /// blocks are one contiguous sub-matrix: row k + n_b i of `qa` is row i of block k's Qa.
@@ -95,13 +190,17 @@ struct BlockQ {
     ConstView qb_block(Index k) const { return view(qb, k, n_max); }
     ConstView q4_block(Index k) const { return view(q4, k, l); }
 
-    /// Store block k's Q matrices from its dGamma (blocks write disjoint elements).
-    void set(Index k, const Eigen::MatrixXd& gamma, const Eigen::MatrixXd& dgamma) {
-        Eigen::MatrixXd a(n_max, n_max), b(n_max, n_max), c(l, n_max);
-        q_matrices(gamma, dgamma, l, a, b, c);
+    /// Store block k's Q matrices (blocks write disjoint elements).
+    void set(Index k, const Eigen::MatrixXd& a, const Eigen::MatrixXd& b, const Eigen::MatrixXd& c) {
         view(qa, k, n_max) = a;
         view(qb, k, n_max) = b;
         view(q4, k, l) = c;
+    }
+    /// The same from block k's dGamma (stage 3 by q_matrices).
+    void set(Index k, const Eigen::MatrixXd& gamma, const Eigen::MatrixXd& dgamma) {
+        Eigen::MatrixXd a(n_max, n_max), b(n_max, n_max), c(l, n_max);
+        q_matrices(gamma, dgamma, l, a, b, c);
+        set(k, a, b, c);
     }
 
 private:
@@ -179,9 +278,9 @@ inline void eigen_perturbation_blocks(const OrderContext& ctx, const BlockQ& q, 
     Eigen::MatrixXd ph(n, 2 * nm);
     ph << ctx.phi.real(), ctx.phi.imag();
     Eigen::MatrixXd za(nb * n, 2 * nm), zb(nb * n, 2 * nm), z4(nb * l, 2 * nm);
-    za.noalias() = q.qa.topLeftCorner(nb * n, n) * ph;
-    zb.noalias() = q.qb.topLeftCorner(nb * n, n) * ph;
-    z4.noalias() = q.q4.leftCols(n) * ph;
+    gemm(za, q.qa.topLeftCorner(nb * n, n), Op::N, ph, Op::N);
+    gemm(zb, q.qb.topLeftCorner(nb * n, n), Op::N, ph, Op::N);
+    gemm(z4, q.q4.leftCols(n), Op::N, ph, Op::N);
 
     // M^T = W chi-bar = R^{-1} R^{-T} (chi^H)^T.
     Eigen::MatrixXcd mt = e.left_h.transpose();
@@ -202,7 +301,7 @@ inline void eigen_perturbation_blocks(const OrderContext& ctx, const BlockQ& q, 
         }
     }
     Eigen::MatrixXcd g_all(nm * l, n);
-    g_all.noalias() = cvc * M;
+    gemm(g_all, cvc, Op::N, M, Op::N);
 
     using Cols = Eigen::Map<const Eigen::MatrixXd>;
     dlambda.resize(nm, nb);
@@ -220,7 +319,7 @@ inline void eigen_perturbation_blocks(const OrderContext& ctx, const BlockQ& q, 
         dlambda.row(i) /= ctx.den(i);
         dshape[i].real() = Cols(z4.col(i).data(), nb, l).transpose();
         dshape[i].imag() = Cols(z4.col(nm + i).data(), nb, l).transpose();
-        dshape[i].noalias() += g_all.middleRows(i * l, l) * zt.transpose();
+        gemm(dshape[i], g_all.middleRows(i * l, l), Op::N, zt, Op::T, 1.0, 1.0);
     }
 }
 
@@ -263,12 +362,12 @@ public:
         detail::require(t_h.rows() == a * b, "T_H must have a*b rows");
         dsigma_.resize(n_sigma, nb_);
         q_ = detail::BlockQ(nb_, n, l);
+        const detail::QStage stage(re, n_sigma);
         detail::parallel_for(nb_, threads, [&](Index k) {  // blocks write disjoint elements
             Eigen::Map<const Eigen::MatrixXd> dh(t_h.col(k).data(), a, b);
-            Eigen::VectorXd ds;
-            const Eigen::MatrixXd dg = detail::gamma_perturbation(re, dh, n, &ds, n_sigma);
-            dsigma_.col(k) = ds;
-            q_.set(k, re.observability(), dg);
+            Eigen::MatrixXd qa(n, n), qb(n, n), q4(l, n);
+            stage.compute(dh, qa, qb, q4, dsigma_.col(k));
+            q_.set(k, qa, qb, q4);
         });
     }
 

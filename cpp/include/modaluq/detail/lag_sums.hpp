@@ -18,6 +18,8 @@
 
 #include <algorithm>
 
+#include "gemm.hpp"
+
 namespace modaluq::detail {
 
 using Index = Eigen::Index;
@@ -35,7 +37,7 @@ inline void add_lag_sums_direct(const double* x, Index d, Index lag, Index off, 
         rhs.resize(n, d + 1);
         rhs.leftCols(d) = Eigen::Map<const Eigen::MatrixXd>(x + c0 * d, d, n).transpose();
         rhs.col(d).setOnes();
-        sums.noalias() += stack * rhs;
+        gemm(sums, stack, Op::N, rhs, Op::N, 1.0, 1.0);
     }
 }
 
@@ -58,7 +60,7 @@ inline void add_lag_sums(const double* x, Index d, Index lag, Index off, Index n
     const Strided a(x0, (s + lag) * d, n_seg, Eigen::OuterStride<>(s * d));  // A^T
     const Eigen::Map<const Eigen::MatrixXd> xs(x0, s * d, n_seg);           // X^T
     Eigen::MatrixXd g(a.rows(), s * d);
-    g.noalias() = a * xs.transpose();
+    gemm(g, a, Op::N, xs, Op::T);
     // Column sums of A^T (sum over segments of x_{sS+m}, m < S + L) from contiguous adds of
     // the first S (a reduction over a strided view is several times slower), then
     // cs[m] = cs[m - S] - x_m' + x_{n_seg S + m'} with m' = m - S for the last L.
