@@ -57,5 +57,5 @@ void modaluq::python::bind_covariance(py::module_& m) {
 
     m.def("compute_covariances", &compute_covariances, py::arg("y_t").noconvert(), py::arg("u_t").noconvert(),
           py::arg("layout"), py::arg("n_blocks"), py::arg("demean") = true, py::arg("with_blocks") = true,
-          py::call_guard<py::gil_scoped_release>());
+          py::arg("threads") = 1, py::call_guard<py::gil_scoped_release>());
 }

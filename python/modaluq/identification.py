@@ -376,8 +376,9 @@ def identify(y, u=None, *, fs: float, block_rows: int, past_block_rows: int | No
         Eigenvalues of the input covariance R3 below ``input_rcond`` times the largest are dropped
         from its pseudo-inverse; ``Result.input_rank_deficient`` reports when that happens.
     threads : int
-        Threads for the per-block and per-order work (default 1). The result does not depend on
-        it; 2 on a 2-core machine roughly halves the time of a large stabilization diagram.
+        Threads for the covariance pass, the per-block and the per-order work (default 1). The
+        result does not depend on it; 2 on a 2-core machine takes 30–40 % off the wall time of
+        a large stabilization diagram.
         When the module is built with OpenBLAS (``modaluq._core.uses_blas``), the large matrix
         products also follow OpenBLAS's own thread setting (``OPENBLAS_NUM_THREADS`` or
         threadpoolctl); set it to 1 when ``threads`` > 1 or when running datasets in parallel.

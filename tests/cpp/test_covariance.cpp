@@ -2,6 +2,9 @@
 
 #include "support.hpp"
 
+#include <limits>
+#include <string>
+
 using namespace support;
 using modaluq::CovarianceAccumulator;
 using modaluq::HankelLayout;
@@ -115,6 +118,42 @@ TEST_CASE("any chunking gives the batch result") {
         CHECK(rel(c.R3, ref.R3) < 1e-12);
         CHECK(rel(c.blocks, ref.blocks) < 1e-12);
     }
+}
+
+TEST_CASE("the batch pass in spans equals one accumulator, and threads do not change it") {
+    // 3.5 spans' worth of samples: compute_covariances cuts the record into 3 spans.
+    const Index n = 3 * (Index(1) << 15) + 20000;
+    REQUIRE(modaluq::detail::covariance_spans(n) == 3);
+    const Sim s = simulate(3, {0, 1, 2}, n, 13, true, 0.3, 0.05);
+    const auto L = layout(3, 1, 4, 5, {0, 2});
+    const Index nb = 7, Nb = (n - L.max_lag()) / nb;
+    CovarianceAccumulator whole(L, Nb);
+    whole.push(s.y, s.u);
+    const auto ref = whole.finish();
+    const auto one = modaluq::compute_covariances(s.y, s.u, L, nb);
+    CHECK(rel(one.R1, ref.R1) < 1e-12);
+    CHECK(rel(one.R2, ref.R2) < 1e-12);
+    CHECK(rel(one.R3, ref.R3) < 1e-12);
+    CHECK(rel(one.R4, ref.R4) < 1e-12);
+    CHECK(rel(one.blocks, ref.blocks) < 1e-12);
+    // The mean is near zero: compare it on the scale of the samples.
+    CHECK((one.channel_mean - ref.channel_mean).cwiseAbs().maxCoeff() < 1e-13 * s.y.cwiseAbs().maxCoeff());
+    for (Index t : {2, 3, 8}) {
+        CAPTURE(t);
+        const auto many = modaluq::compute_covariances(s.y, s.u, L, nb, true, true, t);
+        CHECK((many.R1 - one.R1).cwiseAbs().maxCoeff() == 0.0);
+        CHECK((many.R3 - one.R3).cwiseAbs().maxCoeff() == 0.0);
+        CHECK((many.blocks - one.blocks).cwiseAbs().maxCoeff() == 0.0);
+    }
+    // Output-only, and a NaN in a later span is still reported with its sample index.
+    const auto oo = modaluq::compute_covariances(s.y, MatrixXd(), layout(3, 0, 4, 4), nb, true, true, 2);
+    CovarianceAccumulator oo_whole(layout(3, 0, 4, 4), (n - 7) / nb);
+    oo_whole.push(s.y);
+    CHECK(rel(oo.blocks, oo_whole.finish().blocks) < 1e-12);
+    MatrixXd bad = s.y;
+    bad(1, n - 5) = std::numeric_limits<double>::quiet_NaN();
+    CHECK_THROWS_WITH_AS(modaluq::compute_covariances(bad, MatrixXd(), layout(3, 0, 4, 4), nb, true, true, 2),
+                         doctest::Contains(std::to_string(n - 5).c_str()), modaluq::invalid_argument);
 }
 
 TEST_CASE("a large DC offset changes nothing") {

@@ -19,9 +19,11 @@
 #include <algorithm>
 #include <cmath>
 #include <map>
+#include <vector>
 
 #include "detail/checks.hpp"
 #include "detail/lag_sums.hpp"
+#include "detail/parallel.hpp"
 #include "errors.hpp"
 #include "layout.hpp"
 
@@ -425,16 +427,31 @@ private:
     }
 };
 
+namespace detail {
+
+/// How many consecutive spans compute_covariances cuts a record of n samples into: spans of
+/// at least 2^15 samples, at most 8. It depends on the record only, so the summation order,
+/// and with it every rounding, is the same whatever the number of threads.
+inline Index covariance_spans(Index n_samples) {
+    constexpr Index kMinSpan = Index(1) << 15, kMaxSpans = 8;
+    return std::max<Index>(1, std::min<Index>(kMaxSpans, n_samples / kMinSpan));
+}
+
+}  // namespace detail
+
 /// Batch covariances of a whole record. y is n_outputs x n_samples, u is n_inputs x n_samples
 /// (empty for output-only). N_b = floor(N / n_blocks); n_blocks = 1 gives no uncertainty data.
+/// The record is accumulated in detail::covariance_spans consecutive spans, merged in order;
+/// `threads` > 1 accumulates the spans concurrently (the result does not depend on it).
 inline Covariances compute_covariances(const Eigen::Ref<const Eigen::MatrixXd>& y,
                                        const Eigen::Ref<const Eigen::MatrixXd>& u,
                                        HankelLayout layout, Index n_blocks, bool demean = true,
-                                       bool with_blocks = true) {
+                                       bool with_blocks = true, Index threads = 1) {
     layout.n_outputs = y.rows();
     layout.n_inputs = u.size() == 0 ? 0 : u.rows();
     layout.validate();
     detail::require(n_blocks >= 1, "n_blocks must be >= 1, got ", n_blocks);
+    detail::require(threads >= 1, "threads must be >= 1, got ", threads);
     if (layout.n_inputs > 0)
         detail::require(u.cols() == y.cols(), "u must have as many samples as y (", y.cols(),
                         "), got ", u.cols());
@@ -443,10 +460,19 @@ inline Covariances compute_covariances(const Eigen::Ref<const Eigen::MatrixXd>& 
     detail::require(y.cols() >= min_samples, "record too short: ", y.cols(), " samples; n_blocks = ",
                     n_blocks, " blocks of at least p + q = ", w,
                     " Hankel columns need at least ", min_samples, " samples");
-    const Index n_cols = y.cols() - layout.max_lag();
-    CovarianceAccumulator acc(layout, n_cols / n_blocks, demean);
-    acc.push(y, u);
-    return acc.finish(with_blocks);
+    const Index n = y.cols(), n_cols = n - layout.max_lag(), block_length = n_cols / n_blocks;
+    const Index n_spans = detail::covariance_spans(n);
+    const auto start = [&](Index s) { return n * s / n_spans; };
+    std::vector<CovarianceAccumulator> acc;
+    acc.reserve(static_cast<size_t>(n_spans));
+    for (Index s = 0; s < n_spans; ++s) acc.emplace_back(layout, block_length, demean, start(s));
+    detail::parallel_for(n_spans, threads, [&](Index s) {
+        const Index s0 = start(s), len = start(s + 1) - s0;
+        if (layout.n_inputs > 0) acc[s].push(y.middleCols(s0, len), u.middleCols(s0, len));
+        else acc[s].push(y.middleCols(s0, len));
+    });
+    for (Index s = 1; s < n_spans; ++s) acc[0].merge(acc[s]);
+    return acc[0].finish(with_blocks);
 }
 
 }  // namespace modaluq

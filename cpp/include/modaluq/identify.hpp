@@ -32,8 +32,9 @@ struct IdentifyOptions {
     bool uncertainty = true;        ///< propagate the covariance; false skips all of it
     bool demean = true;             ///< remove each channel's mean over the record
     double input_rcond = 1e-10;     ///< R3 eigenvalues below this times the largest are dropped
-    /// Threads for the per-block and per-order work (1 = the calling thread only). Results do
-    /// not depend on it. Each thread's linear algebra stays single-threaded.
+    /// Threads for the covariance pass (identify from samples), the per-block and the per-order
+    /// work (1 = the calling thread only). Results do not depend on it. Each thread's linear
+    /// algebra is single-threaded, unless a BLAS with threads of its own is linked (gemm.hpp).
     Index threads = 1;
 
     void validate() const {
@@ -189,7 +190,8 @@ inline Identification identify(const Eigen::Ref<const Eigen::MatrixXd>& y,
                         L.max_order());
     }
     const Index n_blocks = options.uncertainty ? options.n_blocks : 1;
-    return identify(compute_covariances(y, u, L, n_blocks, options.demean, options.uncertainty), options);
+    return identify(compute_covariances(y, u, L, n_blocks, options.demean, options.uncertainty, options.threads),
+                    options);
 }
 
 }  // namespace modaluq
