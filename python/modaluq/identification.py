@@ -16,6 +16,7 @@ from typing import Iterable, Sequence
 import numpy as np
 
 from . import _core
+from ._blas import single_threaded as single_threaded_blas
 
 __all__ = ["Modes", "Result", "ModalUQWarning", "identify", "as_samples", "core_options"]
 
@@ -379,9 +380,9 @@ def identify(y, u=None, *, fs: float, block_rows: int, past_block_rows: int | No
         Threads for the covariance pass, the per-block and the per-order work (default 1). The
         result does not depend on it; 2 on a 2-core machine takes 30–40 % off the wall time of
         a large stabilization diagram.
-        When the module is built with OpenBLAS (``modaluq._core.uses_blas``), the large matrix
-        products also follow OpenBLAS's own thread setting (``OPENBLAS_NUM_THREADS`` or
-        threadpoolctl); set it to 1 when ``threads`` > 1 or when running datasets in parallel.
+        When the module is built with OpenBLAS (``modaluq._core.uses_blas``), its products run
+        on one BLAS thread during the call (unless ``OPENBLAS_NUM_THREADS`` is set), so
+        ``threads`` is the only parallelism and parallel processes do not oversubscribe.
 
     Returns
     -------
@@ -405,7 +406,8 @@ def identify(y, u=None, *, fs: float, block_rows: int, past_block_rows: int | No
     if u is not None and u.shape[0] != y.shape[0]:
         raise ValueError(f"u must have as many samples as y ({y.shape[0]}); got {u.shape[0]}")
     u_t = np.empty((0, y.shape[0])) if u is None else u.T
-    ident = _core.identify(y.T, u_t, o)
+    with single_threaded_blas():
+        ident = _core.identify(y.T, u_t, o)
     result = _result_from_core(ident, _settings(o, y.shape[1]), y.shape[1], 0 if u is None else u.shape[1])
     _warn(result)
     return result

@@ -229,3 +229,28 @@ def test_threads_give_the_same_result(chain):
         np.testing.assert_array_equal(a.covariance, b.covariance)
     with pytest.raises(ValueError, match="threads must be >= 1"):
         modaluq.identify(chain.y, chain.u, threads=0, **kw)
+
+
+def test_compute_calls_run_the_blas_on_one_thread(monkeypatch):
+    # modaluq's parallelism is `threads`; its OpenBLAS products run on one thread during a call
+    # (oversubscribed OpenBLAS threads slow runs down several times), and the setting is restored.
+    from threadpoolctl import threadpool_info
+
+    from modaluq import _blas
+
+    if not _core.uses_blas:
+        pytest.skip("this build uses Eigen's products")
+    monkeypatch.delenv("OPENBLAS_NUM_THREADS", raising=False)
+
+    def ours():
+        return [i for i in threadpool_info() if i["user_api"] == "blas" and "libopenblas" in i["filepath"]
+                and "scipy" not in i["filepath"] and "numpy" not in i["filepath"]]
+
+    before = [i["num_threads"] for i in ours()]
+    assert before, "the OpenBLAS the extension links is loaded"
+    with _blas.single_threaded():
+        assert all(i["num_threads"] == 1 for i in ours())
+    assert [i["num_threads"] for i in ours()] == before
+    monkeypatch.setenv("OPENBLAS_NUM_THREADS", "2")  # the user's own setting is left alone
+    with _blas.single_threaded():
+        assert [i["num_threads"] for i in ours()] == before
