@@ -227,8 +227,8 @@ TEST_CASE("stage d lambda, d shape: the batched all-blocks path equals the per-b
         for (Index k = 0; k < nb; ++k) {
             MatrixXd dG(G.rows(), N);
             for (Index i = 0; i < dG.size(); ++i) dG(i) = g01(rng);
-            q.set(k, G, dG);
             modaluq::detail::q_matrices(G, dG, l, qa[k], qb[k], q4[k]);
+            q.set(k, qa[k], qb[k], q4[k]);
             // The interleaved storage returns each block's matrices unchanged.
             CHECK(MatrixXd(q.qa_block(k)) == qa[k]);
             CHECK(MatrixXd(q.qb_block(k)) == qb[k]);

@@ -196,12 +196,6 @@ struct BlockQ {
         view(qb, k, n_max) = b;
         view(q4, k, l) = c;
     }
-    /// The same from block k's dGamma (stage 3 by q_matrices).
-    void set(Index k, const Eigen::MatrixXd& gamma, const Eigen::MatrixXd& dgamma) {
-        Eigen::MatrixXd a(n_max, n_max), b(n_max, n_max), c(l, n_max);
-        q_matrices(gamma, dgamma, l, a, b, c);
-        set(k, a, b, c);
-    }
 
 private:
     /// Block k of m (rows x n_max): every n_b-th row from row k.
