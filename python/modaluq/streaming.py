@@ -81,8 +81,7 @@ class CovarianceAccumulator:
             if u is not None:
                 raise ValueError("u was given but this accumulator has n_inputs=0")
             u_t = np.empty((0, y.shape[0]))
-        with single_threaded_blas():
-            self._acc.push(y.T, u_t)
+        self._acc.push(y.T, u_t)
 
     def merge(self, following: "CovarianceAccumulator") -> None:
         """Append an accumulator over the span that directly follows this one."""
@@ -92,8 +91,7 @@ class CovarianceAccumulator:
 
     def covariances(self, with_blocks: bool = True):
         """The covariances R1..R4 (and per-block covariances) of everything pushed so far."""
-        with single_threaded_blas():
-            return self._acc.finish(bool(with_blocks))
+        return self._acc.finish(bool(with_blocks))
 
     def identify(self, *, fs: float, orders, uncertainty: bool = True, input_rcond: float = 1e-10,
                  threads: int = 1) -> Result:
@@ -103,9 +101,9 @@ class CovarianceAccumulator:
                          orders=orders, n_blocks=2, references=list(layout.references) or None,
                          uncertainty=uncertainty, demean=self._acc.demean, input_rcond=input_rcond,
                          threads=threads)
-        with single_threaded_blas():
-            cov = self._acc.finish(bool(uncertainty))
-            o.n_blocks = max(int(cov.n_blocks), 2)
+        cov = self._acc.finish(bool(uncertainty))
+        o.n_blocks = max(int(cov.n_blocks), 2)
+        with single_threaded_blas():  # the covariance pass uses no BLAS; the propagation does
             ident = _core.identify_covariances(cov, o)
         result = _result_from_core(ident, _settings(o, layout.n_outputs), layout.n_outputs, layout.n_inputs)
         _warn(result)

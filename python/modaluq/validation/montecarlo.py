@@ -158,11 +158,9 @@ def _single_threaded_blas_environment():
 
 
 def _in_process_blas_limit():
-    """Limit this process's BLAS to one thread while records run here, if threadpoolctl is installed."""
-    try:
-        from threadpoolctl import threadpool_limits
-    except ImportError:
-        return contextlib.nullcontext()
+    """Limit this process's BLAS libraries to one thread while records run here."""
+    from threadpoolctl import threadpool_limits
+
     return threadpool_limits(limits=1, user_api="blas")
 
 

@@ -1,6 +1,6 @@
 #pragma once
 /// @file detail/gemm.hpp
-/// The large matrix products of the core (lag sums, dGamma, the Q matrices, stage 4) go
+/// The large matrix products of the core (dGamma, the Q matrices, stage 4, the IO T_H) go
 /// through gemm(), which is Eigen's product, or an optimised BLAS's dgemm/zgemm when
 /// MODALUQ_USE_BLAS is defined and a BLAS is linked (the CMake option of the same name does
 /// both for the tests and the Python module). Why: those products are most of the run time,
@@ -89,7 +89,7 @@ void run(Eigen::Ref<Mat<S>> c, const Eigen::Ref<const Mat<S>>& a, Op ta, const E
 #ifdef MODALUQ_USE_BLAS
     // Eigen's path for what a BLAS rejects: empty products (a leading dimension of 0),
     // dimensions beyond 32-bit integers, and views whose columns overlap (outer stride below
-    // the row count, as in the segmented lag sums).
+    // the row count).
     const auto fits = [](Eigen::Index v) { return v > 0 && v <= INT_MAX; };
     if (fits(m) && fits(n) && fits(k) && fits(a.outerStride()) && fits(b.outerStride()) && fits(c.outerStride()) &&
         a.outerStride() >= a.rows() && b.outerStride() >= b.rows() && c.outerStride() >= c.rows()) {

@@ -13,12 +13,13 @@
 /// G = A^T X holds every product x_{sS+i} x_{sS+t}^T summed over segments, and the lag-l sum
 /// is the sum of G's d x d blocks (t + l, t), t < S. The GEMM now has S d columns and works at
 /// the machine's rate, for (S + L) / (L + 1) times the direct flops.
+///
+/// Both forms multiply views whose columns overlap (outer stride below the row count), which a
+/// BLAS rejects, so they are Eigen's products even in a MODALUQ_USE_BLAS build (gemm.hpp).
 
 #include <Eigen/Core>
 
 #include <algorithm>
-
-#include "gemm.hpp"
 
 namespace modaluq::detail {
 
@@ -37,7 +38,7 @@ inline void add_lag_sums_direct(const double* x, Index d, Index lag, Index off, 
         rhs.resize(n, d + 1);
         rhs.leftCols(d) = Eigen::Map<const Eigen::MatrixXd>(x + c0 * d, d, n).transpose();
         rhs.col(d).setOnes();
-        gemm(sums, stack, Op::N, rhs, Op::N, 1.0, 1.0);
+        sums.noalias() += stack * rhs;
     }
 }
 
@@ -60,7 +61,7 @@ inline void add_lag_sums(const double* x, Index d, Index lag, Index off, Index n
     const Strided a(x0, (s + lag) * d, n_seg, Eigen::OuterStride<>(s * d));  // A^T
     const Eigen::Map<const Eigen::MatrixXd> xs(x0, s * d, n_seg);           // X^T
     Eigen::MatrixXd g(a.rows(), s * d);
-    gemm(g, a, Op::N, xs, Op::T);
+    g.noalias() = a * xs.transpose();
     // Column sums of A^T (sum over segments of x_{sS+m}, m < S + L) from contiguous adds of
     // the first S (a reduction over a strided view is several times slower), then
     // cs[m] = cs[m - S] - x_m' + x_{n_seg S + m'} with m' = m - S for the last L.
