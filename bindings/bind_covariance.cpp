@@ -7,11 +7,35 @@
 
 #include <modaluq/covariance.hpp>
 
+#include <mutex>
+#include <stdexcept>
+
 #include "bindings.hpp"
 
 namespace py = pybind11;
 using modaluq::Index;
 using ConstRef = Eigen::Ref<const Eigen::MatrixXd>;
+
+namespace {
+// push/merge/finish release the GIL, and the C++ accumulator (like a std container) is not
+// meant for concurrent use: two Python threads on one accumulator would corrupt it. The binding
+// refuses the overlap with an error instead of serialising it, because two threads pushing to
+// one stream interleave its samples in an order nobody chose.
+struct GuardedAccumulator {
+    modaluq::CovarianceAccumulator acc;
+    std::mutex busy;
+
+    struct Use {
+        std::unique_lock<std::mutex> lock;
+        explicit Use(GuardedAccumulator& g) : lock(g.busy, std::try_to_lock) {
+            if (!lock.owns_lock())
+                throw std::runtime_error(
+                    "CovarianceAccumulator is in use by another thread: push, merge and finish must not overlap "
+                    "(use one accumulator per thread and merge them in order, or guard it with a lock)");
+        }
+    };
+};
+}  // namespace
 
 void modaluq::python::bind_covariance(py::module_& m) {
     py::class_<HankelLayout>(m, "HankelLayout")
@@ -40,20 +64,45 @@ void modaluq::python::bind_covariance(py::module_& m) {
         .def("covariance_factor",
              static_cast<Eigen::MatrixXd (Covariances::*)() const&>(&Covariances::covariance_factor));
 
-    py::class_<CovarianceAccumulator>(m, "CovarianceAccumulator")
-        .def(py::init<HankelLayout, Index, bool, Index>(), py::arg("layout"), py::arg("block_length"),
-             py::arg("demean") = true, py::arg("first_sample") = 0)
-        .def_property_readonly("layout", &CovarianceAccumulator::layout)
-        .def_property_readonly("block_length", &CovarianceAccumulator::block_length)
-        .def_property_readonly("first_sample", &CovarianceAccumulator::first_sample)
-        .def_property_readonly("end_sample", &CovarianceAccumulator::end_sample)
-        .def_property_readonly("n_samples", &CovarianceAccumulator::n_samples)
-        .def_property_readonly("demean", &CovarianceAccumulator::demean)
-        .def("push", &CovarianceAccumulator::push, py::arg("y_t").noconvert(), py::arg("u_t").noconvert(),
-             py::call_guard<py::gil_scoped_release>())
-        .def("merge", &CovarianceAccumulator::merge, py::arg("next"), py::call_guard<py::gil_scoped_release>())
-        .def("finish", &CovarianceAccumulator::finish, py::arg("with_blocks") = true,
-             py::call_guard<py::gil_scoped_release>());
+    using G = GuardedAccumulator;
+    py::class_<G>(m, "CovarianceAccumulator")
+        .def(py::init([](HankelLayout layout, Index block_length, bool demean, Index first_sample) {
+                 return new G{CovarianceAccumulator(std::move(layout), block_length, demean, first_sample), {}};
+             }),
+             py::arg("layout"), py::arg("block_length"), py::arg("demean") = true, py::arg("first_sample") = 0)
+        .def_property_readonly("layout", [](const G& g) { return g.acc.layout(); })
+        .def_property_readonly("block_length", [](const G& g) { return g.acc.block_length(); })
+        .def_property_readonly("first_sample", [](const G& g) { return g.acc.first_sample(); })
+        .def_property_readonly("end_sample", [](const G& g) { return g.acc.end_sample(); })
+        .def_property_readonly("n_samples", [](const G& g) { return g.acc.n_samples(); })
+        .def_property_readonly("demean", [](const G& g) { return g.acc.demean(); })
+        .def_property_readonly("state_bytes", [](G& g) {
+            G::Use use(g);
+            return g.acc.state_bytes();
+        })
+        .def(
+            "push",
+            [](G& g, const ConstRef& y_t, const ConstRef& u_t) {
+                G::Use use(g);
+                g.acc.push(y_t, u_t);
+            },
+            py::arg("y_t").noconvert(), py::arg("u_t").noconvert(), py::call_guard<py::gil_scoped_release>())
+        .def(
+            "merge",
+            [](G& g, G& next) {
+                G::Use use(g);
+                if (&next == &g) throw modaluq::invalid_argument("merge: an accumulator cannot be merged into itself");
+                G::Use use_next(next);
+                g.acc.merge(next.acc);
+            },
+            py::arg("next"), py::call_guard<py::gil_scoped_release>())
+        .def(
+            "finish",
+            [](G& g, bool with_blocks) {
+                G::Use use(g);
+                return g.acc.finish(with_blocks);
+            },
+            py::arg("with_blocks") = true, py::call_guard<py::gil_scoped_release>());
 
     m.def("compute_covariances", &compute_covariances, py::arg("y_t").noconvert(), py::arg("u_t").noconvert(),
           py::arg("layout"), py::arg("n_blocks"), py::arg("demean") = true, py::arg("with_blocks") = true,

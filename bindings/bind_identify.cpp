@@ -25,7 +25,9 @@ void modaluq::python::bind_identify(py::module_& m) {
         .def_readonly("covariance", &Modes::covariance)
         .def_readonly("block_too_short", &Modes::block_too_short)
         .def_readonly("singular_value_gap", &Modes::singular_value_gap)
-        .def_readonly("close_singular_values", &Modes::close_singular_values);
+        .def_readonly("close_singular_values", &Modes::close_singular_values)
+        .def_readonly("degenerate", &Modes::degenerate)
+        .def_readonly("note", &Modes::note);
 
     py::class_<IdentifyOptions>(m, "IdentifyOptions")
         .def(py::init<>())
@@ -40,6 +42,7 @@ void modaluq::python::bind_identify(py::module_& m) {
         .def_readwrite("input_rcond", &IdentifyOptions::input_rcond)
         .def_readwrite("threads", &IdentifyOptions::threads)
         .def("validate", &IdentifyOptions::validate)
+        .def_property_readonly_static("max_threads", [](py::object) { return IdentifyOptions::kMaxThreads; })
         .def("layout", &IdentifyOptions::layout, py::arg("n_outputs"), py::arg("n_inputs"));
 
     py::class_<Identification>(m, "Identification")
@@ -54,6 +57,8 @@ void modaluq::python::bind_identify(py::module_& m) {
         .def_readonly("input_condition", &Identification::input_condition)
         .def_readonly("input_rank_deficient", &Identification::input_rank_deficient)
         .def_readonly("too_few_blocks", &Identification::too_few_blocks)
+        .def_readonly("numerical_rank", &Identification::numerical_rank)
+        .def_readonly("signal_to_noise", &Identification::signal_to_noise)
         .def_readonly("warnings", &Identification::warnings);
 
     m.def("identify", py::overload_cast<const ConstRef&, const ConstRef&, IdentifyOptions>(&identify),

@@ -1,29 +1,36 @@
 #!/usr/bin/env bash
-# Set up and run every test of modaluq: the C++ core (ctest), a downstream CMake project built
-# against the installed headers, and the Python package (pytest). Idempotent; needs root for
-# apt-get on a fresh Debian/Ubuntu machine.
+# Set up and run every test of modaluq on a Debian/Ubuntu machine (the command CI runs):
+#   1. scripts/setup.sh --test: system packages, the virtual environment .venv, the package;
+#   2. the C++ core's tests (ctest), built with assertions on and AddressSanitizer +
+#      UndefinedBehaviorSanitizer, so a read out of bounds or an overflow fails the run;
+#   3. a C++ project built against the installed headers (cpp/examples);
+#   4. pytest (oracle cross-validation, Monte Carlo, loaders, CLI, ...);
+#   5. a short fuzz run over the file loaders (tests/fuzz; FUZZ_SECONDS, default 60).
+# Idempotent. JOBS sets the build parallelism (default 2).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 JOBS=${JOBS:-2}
+bash scripts/setup.sh --test
+PY="${MODALUQ_VENV:-.venv}/bin/python"
 
-# OpenBLAS is optional for the library; the tests and the Python module use it when present.
-if ! dpkg -s libeigen3-dev doctest-dev libopenblas-dev >/dev/null 2>&1; then
-  export DEBIAN_FRONTEND=noninteractive
-  apt-get update -q && apt-get install -y -q --no-install-recommends libeigen3-dev doctest-dev libopenblas-dev
-fi
-python3 -m pip install -q --upgrade pip >/dev/null
-python3 -m pip install -q ".[all]"
-
-echo "== C++ core: build and ctest"
-cmake -S . -B build/cpp -DCMAKE_BUILD_TYPE=Release >/dev/null
-cmake --build build/cpp -j"$JOBS"
-ctest --test-dir build/cpp --output-on-failure -j"$JOBS"
+echo "== C++ core: build (assertions, ASan, UBSan) and ctest"
+san="-fsanitize=address,undefined -fno-sanitize-recover=all -fno-omit-frame-pointer"
+cmake -S . -B build/cpp-sanitize -DCMAKE_BUILD_TYPE=Debug -DCMAKE_CXX_FLAGS="$san" \
+      -DCMAKE_EXE_LINKER_FLAGS="$san" >/dev/null
+cmake --build build/cpp-sanitize -j"$JOBS"
+ASAN_OPTIONS=detect_leaks=1:abort_on_error=0 UBSAN_OPTIONS=print_stacktrace=1 \
+  ctest --test-dir build/cpp-sanitize --output-on-failure -j"$JOBS"
 
 echo "== C++ consumer project against the installed package"
-cmake --install build/cpp --prefix build/prefix >/dev/null
+cmake --install build/cpp-sanitize --prefix build/prefix >/dev/null
 cmake -S cpp/examples -B build/example -DCMAKE_PREFIX_PATH="$PWD/build/prefix" >/dev/null
 cmake --build build/example -j"$JOBS"
 build/example/identify_stream
 
 echo "== Python: pytest"
-python3 -m pytest -q
+"$PY" -m pytest -q
+
+if [[ -f tests/fuzz/fuzz_loaders.py ]]; then
+  echo "== loaders: short fuzz run"
+  "$PY" tests/fuzz/fuzz_loaders.py --seconds "${FUZZ_SECONDS:-60}" --seed 1
+fi

@@ -8,6 +8,7 @@ plain frozen dataclasses that print, convert to pandas and plot.
 
 from __future__ import annotations
 
+import math
 import numbers
 import warnings
 from dataclasses import dataclass, field
@@ -28,49 +29,102 @@ class ModalUQWarning(UserWarning):
 # --------------------------------------------------------------------------- argument checks
 
 
-def as_samples(x, name: str, *, allow_none: bool = False):
+#: Largest value of a count (samples, channels, block rows, blocks, orders, indices): products of
+#: two counts then stay inside the core's 64-bit indices, so a typo is refused here, by name,
+#: rather than overflowing there.
+MAX_COUNT = 2**31 - 1
+#: Largest ``threads``: above any machine's cores, low enough that a typo is refused.
+MAX_THREADS = 256
+
+
+def as_samples(x, name: str, *, allow_none: bool = False, n_channels: int | None = None):
     """Return ``x`` as a C-contiguous float64 ``(n_samples, n_channels)`` array.
 
-    A 1-D array is one channel. Complex or non-numeric data raise ``TypeError``; arrays with
-    more than two dimensions raise ``ValueError``; both name the argument. No copy is made when
-    ``x`` already is a C-contiguous float64 array.
+    A 1-D array is one channel. Complex, boolean or non-numeric data raise ``TypeError``; more
+    than two dimensions, a masked value of a :class:`numpy.ma.MaskedArray` (missing data, which
+    SSI-cov cannot take) or the wrong number of channels raise ``ValueError``; all name the
+    argument. With ``n_channels`` (a chunk of a stream, which may hold fewer samples than
+    channels) ``x`` must have that many columns; without it ``x`` is a whole record, which must
+    have more samples than channels (otherwise it is taken for a transposed array). No copy is
+    made when ``x`` already is a C-contiguous float64 array.
     """
     if x is None:
         if allow_none:
             return None
         raise TypeError(f"{name} must be an array of samples, got None")
-    arr = np.asarray(x)
+    mask = np.ma.getmaskarray(x) if isinstance(x, np.ma.MaskedArray) else None
+    arr = np.asarray(x)  # a MaskedArray's data, mask dropped: checked below
     if np.iscomplexobj(arr):
         raise TypeError(f"{name} must be real; got complex data (dtype {arr.dtype})")
-    if arr.dtype.kind not in "biuf":
+    if arr.dtype.kind == "b":  # True/False are not measurements (astype(float) if 0/1 is meant)
+        raise TypeError(f"{name} must hold real numbers; got booleans (dtype bool)")
+    if arr.dtype.kind not in "iuf":
         raise TypeError(f"{name} must hold real numbers; got dtype {arr.dtype}")
+    transposable = arr.ndim == 2
     if arr.ndim == 1:
         arr = arr[:, None]
     elif arr.ndim != 2:
         raise ValueError(f"{name} must have shape (n_samples, n_channels) or (n_samples,); got shape {arr.shape}")
-    if arr.shape[1] == 0:
+    if mask is not None and mask.any():
+        sample, channel = np.argwhere(mask.reshape(arr.shape))[0]
+        raise ValueError(f"{name}: sample {sample}, channel {channel} is masked (missing data); SSI-cov needs "
+                         "every sample: fill the gap or analyse the parts on either side of it")
+    if n_channels is not None:
+        if arr.shape[1] != n_channels:
+            hint = f"; did you mean {name}.T?" if transposable and arr.shape[0] == n_channels else ""
+            raise ValueError(f"{name} must have {n_channels} channels (columns); got shape {arr.shape}{hint}")
+    elif arr.shape[1] == 0:
         raise ValueError(f"{name} must have at least one channel; got shape {arr.shape}")
+    elif arr.shape[0] == 0:
+        raise ValueError(f"{name} must have at least one sample; got shape {arr.shape}")
+    elif arr.shape[1] > arr.shape[0]:
+        raise ValueError(f"{name} has shape {arr.shape}: more channels ({arr.shape[1]}) than samples "
+                         f"({arr.shape[0]}); samples are rows, channels columns: did you mean {name}.T?")
     return np.ascontiguousarray(arr, dtype=np.float64)
 
 
-def _integer(name, value, *, minimum=None):
+def _boolean(name, value) -> bool:
+    # bool("False") is True: a string or a number where a switch is expected is a mistake.
+    if not isinstance(value, (bool, np.bool_)):
+        raise TypeError(f"{name} must be True or False; got {value!r}")
+    return bool(value)
+
+
+def _integer(name, value, *, minimum=None, maximum=MAX_COUNT):
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Integral):
         raise TypeError(f"{name} must be an integer; got {value!r}")
     value = int(value)
     if minimum is not None and value < minimum:
         raise ValueError(f"{name} must be >= {minimum}; got {value}")
+    if maximum is not None and value > maximum:
+        raise ValueError(f"{name} must be <= {maximum}; got {value}")
     return value
 
 
-def _integers(name, values, *, minimum=None) -> list[int]:
+def _integers(name, values, *, minimum=None, maximum=MAX_COUNT) -> list[int]:
     if isinstance(values, numbers.Integral) and not isinstance(values, (bool, np.bool_)):
         values = [values]
     if isinstance(values, (str, bytes)) or not isinstance(values, Iterable):
         raise TypeError(f"{name} must be an integer or an iterable of integers; got {values!r}")
-    out = [_integer(name, v, minimum=minimum) for v in values]
+    out = [_integer(name, v, minimum=minimum, maximum=maximum) for v in values]
     if not out:
         raise ValueError(f"{name} must not be empty")
     return out
+
+
+def _real(name, value, *, low=None, high=None, low_open=False, high_open=False, allow_none=False):
+    if value is None and allow_none:
+        return None
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
+        raise TypeError(f"{name} must be a real number; got {value!r}")
+    value = float(value)
+    if not math.isfinite(value):
+        raise ValueError(f"{name} must be finite; got {value}")
+    if low is not None and (value < low or (low_open and value == low)):
+        raise ValueError(f"{name} must be {'>' if low_open else '>='} {low}; got {value}")
+    if high is not None and (value > high or (high_open and value == high)):
+        raise ValueError(f"{name} must be {'<' if high_open else '<='} {high}; got {value}")
+    return value
 
 
 def _sampling_frequency(fs) -> float:
@@ -92,12 +146,10 @@ def core_options(*, fs, block_rows, past_block_rows=None, orders, n_blocks=50, r
     o.orders = sorted(set(_integers("orders", orders, minimum=1)))
     o.n_blocks = _integer("n_blocks", n_blocks)
     o.references = [] if references is None else _integers("references", references, minimum=0)
-    o.uncertainty = bool(uncertainty)
-    o.demean = bool(demean)
-    if not isinstance(input_rcond, numbers.Real) or not (0 <= float(input_rcond) < 1):
-        raise ValueError(f"input_rcond must be a number in [0, 1); got {input_rcond!r}")
-    o.input_rcond = float(input_rcond)
-    o.threads = _integer("threads", threads, minimum=1)
+    o.uncertainty = _boolean("uncertainty", uncertainty)
+    o.demean = _boolean("demean", demean)
+    o.input_rcond = _real("input_rcond", input_rcond, low=0, high=1, high_open=True)
+    o.threads = _integer("threads", threads, minimum=1, maximum=MAX_THREADS)
     o.validate()
     return o
 
@@ -130,6 +182,8 @@ class Modes:
     block_too_short: np.ndarray | None = None    #: (n_modes,) blocks shorter than half the decay time
     singular_value_gap: float = float("nan")     #: (s_n - s_{n+1}) / its std
     close_singular_values: bool = False          #: the order cuts singular values within 3 std
+    degenerate: bool = False                     #: no modes: above the numerical rank of H, or A not decomposable
+    note: str = ""                               #: why the order is degenerate
 
     @classmethod
     def _from_core(cls, m) -> "Modes":
@@ -155,6 +209,8 @@ class Modes:
             block_too_short=m.block_too_short if has_std else None,
             singular_value_gap=float(m.singular_value_gap),
             close_singular_values=bool(m.close_singular_values),
+            degenerate=bool(m.degenerate),
+            note=str(m.note),
         )
 
     @property
@@ -201,6 +257,8 @@ class Modes:
         return "\n".join(lines)
 
     def __str__(self) -> str:
+        if self.degenerate:
+            return f"order {self.order}: no modes ({self.note})"
         flag = "  (order cuts close singular values: std not meaningful)" if self.close_singular_values else ""
         return f"order {self.order}: {self.n_modes} modes{flag}\n{self.table()}"
 
@@ -228,6 +286,8 @@ class Result:
     input_condition: float = 0.0      #: condition number of R3 (input/output only)
     input_rank_deficient: bool = False
     too_few_blocks: bool = False
+    numerical_rank: int = 0           #: singular values of H above max(a, b) eps s_1; higher orders are degenerate
+    signal_to_noise: float = float("nan")  #: s_1 of H over its standard deviation (NaN without uncertainty)
     warnings: tuple = field(default_factory=tuple)
 
     @property
@@ -319,6 +379,8 @@ def _result_from_core(ident, settings, n_outputs, n_inputs) -> Result:
         input_condition=float(ident.input_condition),
         input_rank_deficient=bool(ident.input_rank_deficient),
         too_few_blocks=bool(ident.too_few_blocks),
+        numerical_rank=int(ident.numerical_rank),
+        signal_to_noise=float(ident.signal_to_noise),
         warnings=tuple(ident.warnings),
     )
 

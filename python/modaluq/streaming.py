@@ -12,7 +12,8 @@ import numpy as np
 
 from . import _core
 from ._blas import single_threaded as single_threaded_blas
-from .identification import Result, _integer, _integers, _result_from_core, _settings, _warn, as_samples, core_options
+from .identification import (Result, _boolean, _integer, _integers, _result_from_core, _settings, _warn, as_samples,
+                             core_options)
 
 __all__ = ["CovarianceAccumulator"]
 
@@ -54,8 +55,11 @@ class CovarianceAccumulator:
         layout.block_rows = _integer("block_rows", block_rows, minimum=2)
         layout.past_block_rows = 0 if past_block_rows is None else _integer("past_block_rows", past_block_rows, minimum=1)
         layout.references = [] if references is None else _integers("references", references, minimum=0)
+        # first_sample counts a whole stream (months of samples), not one array: only the core's
+        # 64-bit index bounds it
         self._acc = _core.CovarianceAccumulator(layout, _integer("block_length", block_length, minimum=1),
-                                                bool(demean), _integer("first_sample", first_sample, minimum=0))
+                                                _boolean("demean", demean),
+                                                _integer("first_sample", first_sample, minimum=0, maximum=2**62))
 
     @property
     def n_samples(self) -> int:
@@ -66,16 +70,19 @@ class CovarianceAccumulator:
     def block_length(self) -> int:
         return self._acc.block_length
 
+    @property
+    def state_bytes(self) -> int:
+        """Bytes of state held: it grows with the number of blocks, not with the samples."""
+        return int(self._acc.state_bytes)
+
     def push(self, y, u=None) -> None:
         """Add samples: ``y`` is ``(n, n_outputs)``, ``u`` is ``(n, n_inputs)`` (omit when output-only)."""
         layout = self._acc.layout
-        y = as_samples(y, "y")
-        if y.shape[1] != layout.n_outputs:
-            raise ValueError(f"y must have {layout.n_outputs} channels; got shape {y.shape}")
+        y = as_samples(y, "y", n_channels=layout.n_outputs)
         if layout.n_inputs:
-            u = as_samples(u, "u")
-            if u.shape != (y.shape[0], layout.n_inputs):
-                raise ValueError(f"u must have shape ({y.shape[0]}, {layout.n_inputs}); got {u.shape}")
+            u = as_samples(u, "u", n_channels=layout.n_inputs)
+            if u.shape[0] != y.shape[0]:
+                raise ValueError(f"u must have as many samples as y ({y.shape[0]}); got {u.shape[0]}")
             u_t = u.T
         else:
             if u is not None:
@@ -91,7 +98,7 @@ class CovarianceAccumulator:
 
     def covariances(self, with_blocks: bool = True):
         """The covariances R1..R4 (and per-block covariances) of everything pushed so far."""
-        return self._acc.finish(bool(with_blocks))
+        return self._acc.finish(_boolean("with_blocks", with_blocks))
 
     def identify(self, *, fs: float, orders, uncertainty: bool = True, input_rcond: float = 1e-10,
                  threads: int = 1) -> Result:
@@ -101,7 +108,7 @@ class CovarianceAccumulator:
                          orders=orders, n_blocks=2, references=list(layout.references) or None,
                          uncertainty=uncertainty, demean=self._acc.demean, input_rcond=input_rcond,
                          threads=threads)
-        cov = self._acc.finish(bool(uncertainty))
+        cov = self._acc.finish(o.uncertainty)
         o.n_blocks = max(int(cov.n_blocks), 2)
         with single_threaded_blas():  # the covariance pass uses no BLAS; the propagation does
             ident = _core.identify_covariances(cov, o)

@@ -149,11 +149,10 @@ TEST_CASE("stage dA, dC: explicit J_{A,Gamma} (with the residual term) equals fi
     auto ac = [&](const MatrixXd& g) {
         const Index a = g.rows();
         MatrixXd A = g.topRows(a - l).colPivHouseholderQr().solve(g.bottomRows(a - l));
+        // [vec A; vec C] (a comma initializer must be given every coefficient: assertions check it)
+        const MatrixXd C = g.topRows(l);
         VectorXd v(n * n + l * n);
-        v << Eigen::Map<const VectorXd>(A.data(), n * n), Eigen::Map<const VectorXd>(g.data(), g.size()).head(0),
-            VectorXd::Zero(0);
-        MatrixXd C = g.topRows(l);
-        v.tail(l * n) = Eigen::Map<const VectorXd>(C.data(), l * n);
+        v << Eigen::Map<const VectorXd>(A.data(), n * n), Eigen::Map<const VectorXd>(C.data(), l * n);
         return v;
     };
     std::mt19937_64 rng(5);

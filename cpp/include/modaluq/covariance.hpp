@@ -18,6 +18,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstddef>
 #include <map>
 #include <vector>
 
@@ -80,6 +81,8 @@ public:
         layout_.validate();
         detail::require(block_length_ >= layout_.window(), "block_length must be >= p + q = ",
                         layout_.window(), ", got ", block_length_);
+        detail::require(block_length_ <= kMaxBlockLength, "block_length must be <= ", kMaxBlockLength, ", got ",
+                        block_length_);
         detail::require(first_ >= 0, "first_sample must be >= 0, got ", first_);
         d_ = layout_.n_channels();
         lag_ = layout_.max_lag();
@@ -185,6 +188,18 @@ public:
         end_ = b.end_;
     }
 
+    /// Bytes of state held now. It grows with the number of blocks, not with the samples: per
+    /// block ((L+1) d (d+1) + d L) doubles, L = p + q - 1 and d = l + m (the lag sums and the
+    /// samples after its boundary), so a record cut into n_b blocks holds about n_b times that
+    /// whatever its length. Choose block_length from the expected record length to bound it.
+    std::size_t state_bytes() const {
+        std::size_t doubles = static_cast<std::size_t>(head_.size() + tail_.size() + 2 * d_);
+        for (const auto& kv : blocks_) doubles += static_cast<std::size_t>(kv.second.sums.size());
+        for (const auto& kv : windows_) doubles += static_cast<std::size_t>(kv.second.x.size());
+        return doubles * sizeof(double) +
+               (blocks_.size() + windows_.size()) * (sizeof(Index) + sizeof(BlockSums) + 4 * sizeof(void*));
+    }
+
     /// Number of complete blocks so far.
     Index n_complete_blocks() const {
         const Index n_cols = std::max<Index>(0, end_ - lag_);
@@ -256,6 +271,7 @@ private:
     };
 
     static constexpr Index kPiece = 1 << 15;  // samples per piece of a push
+    static constexpr Index kMaxBlockLength = Index(1) << 50;  // sample indices stay far from overflow
 
     HankelLayout layout_;
     Index block_length_;
@@ -456,6 +472,9 @@ inline Covariances compute_covariances(const Eigen::Ref<const Eigen::MatrixXd>& 
         detail::require(u.cols() == y.cols(), "u must have as many samples as y (", y.cols(),
                         "), got ", u.cols());
     const Index w = layout.window();
+    // n_blocks * w is formed only once it is known to be at most the record length.
+    detail::require(n_blocks <= y.cols() / w, "record too short: ", y.cols(), " samples cannot hold n_blocks = ",
+                    n_blocks, " blocks of at least p + q = ", w, " Hankel columns");
     const Index min_samples = n_blocks * w + w - 1;
     detail::require(y.cols() >= min_samples, "record too short: ", y.cols(), " samples; n_blocks = ",
                     n_blocks, " blocks of at least p + q = ", w,

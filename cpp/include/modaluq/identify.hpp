@@ -7,9 +7,11 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <memory>
-#include <utility>
+#include <sstream>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "covariance.hpp"
@@ -45,8 +47,10 @@ struct IdentifyOptions {
         for (Index n : orders) detail::require(n >= 1, "orders must be >= 1, got ", n);
         if (uncertainty) detail::require(n_blocks >= 2, "n_blocks must be >= 2, got ", n_blocks);
         detail::require(input_rcond >= 0.0 && input_rcond < 1.0, "input_rcond must be in [0, 1), got ", input_rcond);
-        detail::require(threads >= 1, "threads must be >= 1, got ", threads);
+        detail::require(threads >= 1 && threads <= kMaxThreads, "threads must be in 1..", kMaxThreads, ", got ",
+                        threads);
     }
+    static constexpr Index kMaxThreads = 1024;  ///< more is a mistake, not a machine
 
     HankelLayout layout(Index n_outputs, Index n_inputs) const {
         HankelLayout L;
@@ -72,6 +76,10 @@ struct Identification {
     double input_condition = 0.0;        ///< condition number of R3 (input/output only)
     bool input_rank_deficient = false;   ///< R3 singular: inputs constant, duplicated or not exciting
     bool too_few_blocks = false;         ///< n_b - 1 < 2 + 2 l: a mode's joint covariance is rank deficient
+    Index numerical_rank = 0;            ///< singular values of H above max(a, b) eps s_1; higher orders are degenerate
+    /// s_1 / std(s_1): how far the largest singular value of H stands above its own estimation
+    /// noise (NaN without uncertainty); identify refuses a record where it is below 3.
+    double signal_to_noise = std::numeric_limits<double>::quiet_NaN();
     std::vector<std::string> warnings;   ///< what the flags above mean for this run, in words
 
     /// The modes at model order n (throws invalid_argument if n was not requested).
@@ -85,6 +93,11 @@ struct Identification {
 };
 
 namespace detail {
+/// |H| / |R1| at or below which H is numerically zero (its entries are rounding errors of R1's).
+inline constexpr double kNumericallyZero = 1e-8;
+/// s_1 / std(s_1) below which H is indistinguishable from its estimation noise.
+inline constexpr double kMinSignalToNoise = 3.0;
+
 /// The identification proper; `t_r` is the covariance factor (empty without uncertainty).
 inline Identification identify_with_factor(const Covariances& cov, Eigen::MatrixXd t_r, IdentifyOptions options) {
     std::sort(options.orders.begin(), options.orders.end());
@@ -110,8 +123,22 @@ inline Identification identify_with_factor(const Covariances& cov, Eigen::Matrix
                 "): inputs are constant, duplicated or not exciting enough for block_rows = ", L.p(),
                 "; their effect was removed only in the subspace they span and the uncertainty is not reliable"));
     }
+    // A record that cannot be identified is refused with the reason; an order that cannot is a
+    // flag on that order (below).
+    detail::require(cov.R1.allFinite() && sub.H.allFinite(),
+                    "the covariances of the data are not finite: the samples are so large that their products "
+                    "overflow; rescale the data (e.g. to SI units)");
+    const double r1_norm = cov.R1.norm(), h_norm = sub.H.norm();
+    detail::require(r1_norm > 0.0,
+                    "y has no dynamics: its covariances are zero (is y constant or all zero after removing the mean?)");
+    detail::require(h_norm > kNumericallyZero * r1_norm, "the subspace matrix H is numerically zero (|H| / |R1| = ",
+                    h_norm / r1_norm, "): the inputs u explain the outputs y exactly, so nothing is left to "
+                    "identify (were outputs passed as inputs?)");
     const Realization re(sub.H, L.n_outputs, n_max);
     out.singular_values = re.singular_values();
+    out.numerical_rank = re.numerical_rank();
+    detail::require(re.max_order() >= 2, "the subspace matrix H has numerical rank ", re.numerical_rank(),
+                    ": the record holds no oscillation to identify (is y constant, a step or an impulse?)");
 
     std::unique_ptr<UncertaintyPropagator> prop;
     double block_seconds = 0.0;
@@ -123,28 +150,71 @@ inline Identification identify_with_factor(const Covariances& cov, Eigen::Matrix
         if (out.too_few_blocks)
             out.warnings.push_back(detail::concat(
                 "n_blocks = ", out.n_blocks, " is too few for the joint covariance of the ", 2 + 2 * L.n_outputs,
-                " parameters of a mode (need at least ", 3 + 2 * L.n_outputs, "); the standard deviations are still valid"));
+                " parameters of a mode: use n_blocks >= ", 3 + 2 * L.n_outputs,
+                " (the standard deviations of f and xi alone are still estimated, but from few blocks)"));
         // T_H lives only while the propagator takes what it needs from it.
         prop = std::make_unique<UncertaintyPropagator>(re, propagate_to_subspace(sub, cov, std::move(t_r)),
                                                        L.rows_past(), options.threads);
+        out.signal_to_noise = re.singular_values()(0) / prop->singular_value_std(0);
+        detail::require(!(out.signal_to_noise < kMinSignalToNoise), "the subspace matrix H is at the level of its own "
+                        "estimation noise (largest singular value ", re.singular_values()(0), " is ",
+                        out.signal_to_noise, " standard deviations from zero, fewer than ", kMinSignalToNoise,
+                        "): there is nothing to identify (were outputs passed as inputs? is a sensor disconnected?)");
     }
     // Orders are independent: highest (most expensive) first, on options.threads threads.
     const Index n_orders = static_cast<Index>(options.orders.size());
     out.modes.resize(options.orders.size());
     detail::parallel_for(n_orders, options.threads, [&](Index i) {
-        const Index k = n_orders - 1 - i;
-        const StateSpace ss = re.system(options.orders[k]);
-        detail::Eigenstructure eig;
-        Modes m = modes_from_system(ss, options.fs, prop ? &eig : nullptr);
-        if (prop) prop->apply(m, eig, ss, options.fs, block_seconds);
+        const Index k = n_orders - 1 - i, n = options.orders[k];
+        Modes m;
+        m.order = n;
+        if (n > re.max_order()) {
+            m.degenerate = true;
+            m.note = detail::concat("order ", n, " is above the numerical rank of H (", re.numerical_rank(), ")");
+        } else {
+            try {
+                const StateSpace ss = re.system(n);
+                detail::Eigenstructure eig;
+                m = modes_from_system(ss, options.fs, prop ? &eig : nullptr);
+                if (prop) prop->apply(m, eig, ss, options.fs, block_seconds);
+            } catch (const numerical_error& e) {
+                m = Modes();
+                m.order = n;
+                m.degenerate = true;
+                m.note = e.what();
+            }
+        }
         out.modes[k] = std::move(m);
     });
-    Index short_blocks = 0;
-    for (const Modes& m : out.modes) short_blocks += m.block_too_short.count();
-    if (short_blocks > 0)
+    std::vector<Index> degenerate;
+    for (const Modes& m : out.modes)
+        if (m.degenerate) degenerate.push_back(m.order);
+    if (!degenerate.empty()) {
+        std::ostringstream list;
+        for (size_t i = 0; i < degenerate.size(); ++i) list << (i ? ", " : "") << degenerate[i];
         out.warnings.push_back(detail::concat(
-            short_blocks, " pole(s) decay more slowly than the blocks are long (block of ", block_seconds,
-            " s < half of 1/(2 pi f xi)); their standard deviations are less reliable: use fewer, longer blocks"));
+            "no modes at order(s) ", list.str(), ": above the numerical rank of H (", re.numerical_rank(),
+            ") or no usable eigen-decomposition of A there; use orders <= ", re.max_order()));
+    }
+    Index short_blocks = 0;
+    double longest_decay_s = 0.0;  // of the flagged poles: what the blocks should cover
+    for (const Modes& m : out.modes)
+        for (Index i = 0; i < m.block_too_short.size(); ++i)
+            if (m.block_too_short(i)) {
+                ++short_blocks;
+                longest_decay_s = std::max(longest_decay_s,
+                                           1.0 / (2.0 * detail::pi * m.frequency_hz(i) * m.damping_ratio(i)));
+            }
+    if (short_blocks > 0) {
+        const double record_s = static_cast<double>(cov.n_columns) / options.fs;
+        const Index fitting = static_cast<Index>(record_s / (0.5 * longest_decay_s));
+        out.warnings.push_back(detail::concat(
+            short_blocks, " pole(s) decay more slowly than the blocks are long (blocks of ", block_seconds,
+            " s, less than half of the decay time 1/(2 pi f xi), up to ", longest_decay_s,
+            " s); their standard deviations are less reliable: ",
+            fitting >= 2 ? detail::concat("use n_blocks <= ", fitting)
+                         : std::string("the record is too short for these poles' decay; record longer")));
+    }
     return out;
 }
 }  // namespace detail

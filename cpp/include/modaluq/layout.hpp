@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <vector>
 
+#include "detail/checks.hpp"
 #include "errors.hpp"
 
 namespace modaluq {
@@ -16,6 +17,8 @@ using Index = Eigen::Index;
 
 /// Which channels and horizons form R1..R4 (the paper's Eq. 18).
 struct HankelLayout {
+    static constexpr Index kMaxHorizon = Index(1) << 24;   ///< bound on p and q (validate)
+    static constexpr Index kMaxChannels = Index(1) << 20;  ///< bound on l and m (validate)
     Index n_outputs = 0;             ///< l: outputs y (>= 1)
     Index n_inputs = 0;              ///< m: known inputs u (0 = output-only)
     Index block_rows = 0;            ///< p: future block rows (>= 2)
@@ -53,6 +56,16 @@ struct HankelLayout {
         detail::require(block_rows >= 2, "block_rows must be >= 2, got ", block_rows);
         detail::require(past_block_rows >= 0, "past_block_rows must be >= 1 (or 0 for block_rows), got ",
                         past_block_rows);
+        // Every size below is formed from these as Index products: bound them first (in
+        // double) so none can overflow.
+        detail::require(block_rows <= kMaxHorizon, "block_rows must be <= ", kMaxHorizon, ", got ", block_rows);
+        detail::require(past_block_rows <= kMaxHorizon, "past_block_rows must be <= ", kMaxHorizon, ", got ",
+                        past_block_rows);
+        detail::require(n_outputs <= kMaxChannels, "n_outputs must be <= ", kMaxChannels, ", got ", n_outputs);
+        detail::require(n_inputs <= kMaxChannels, "n_inputs must be <= ", kMaxChannels, ", got ", n_inputs);
+        const double a = double(p()) * double(n_outputs), c = double(p()) * double(n_inputs);
+        const double b = double(q()) * double(references.empty() ? n_outputs : Index(references.size()));
+        detail::require_size(a * b + a * c + c * c + b * c, "the covariances R1..R4 for these horizons");
         std::vector<Index> seen;
         for (Index ref : references) {
             detail::require(ref >= 0 && ref < n_outputs, "references: index ", ref,

@@ -11,6 +11,7 @@
 #include <complex>
 #include <limits>
 #include <numeric>
+#include <string>
 #include <vector>
 
 #include "realization.hpp"
@@ -43,6 +44,10 @@ struct Modes {
     /// The order cuts singular values closer than three times their uncertainty, so its
     /// first-order uncertainty is not meaningful (uq-math §5.4).
     bool close_singular_values = false;
+    /// No modes at this order: it is above the numerical rank of H, or (A, C) has no usable
+    /// eigen-decomposition there (`note` says which). The other orders are unaffected.
+    bool degenerate = false;
+    std::string note;                    ///< why the order is degenerate (empty otherwise)
 
     Index n_modes() const { return frequency_hz.size(); }
 };
@@ -65,6 +70,8 @@ struct Eigenstructure {
 inline Modes modes_from_system(const StateSpace& ss, double fs, detail::Eigenstructure* eig = nullptr) {
     using cd = std::complex<double>;
     const Index n = ss.A.rows();
+    if (!ss.A.allFinite() || !ss.C.allFinite())
+        throw numerical_error("A or C is not finite (Gamma_up is numerically singular at this order)");
     Eigen::EigenSolver<Eigen::MatrixXd> es(ss.A, /*computeEigenvectors=*/true);
     if (es.info() != Eigen::Success) throw numerical_error("eigen-decomposition of A did not converge");
     const Eigen::VectorXcd values = es.eigenvalues();

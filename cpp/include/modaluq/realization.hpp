@@ -8,7 +8,9 @@
 #include <Eigen/QR>
 #include <Eigen/SVD>
 
+#include <algorithm>
 #include <cmath>
+#include <limits>
 
 #include "errors.hpp"
 #include "layout.hpp"
@@ -26,7 +28,8 @@ class Realization {
 public:
     /// @param H          subspace matrix (a x b), a = p l
     /// @param n_outputs  l
-    /// @param max_order  largest order that will be asked for, <= min((p-1) l, q r)
+    /// @param max_order  largest order that will be asked for, <= min((p-1) l, q r). Orders above
+    ///                   the numerical rank of H have no realization: max_order() is then the rank.
     Realization(const Eigen::MatrixXd& H, Index n_outputs, Index max_order)
         : l_(n_outputs), n_max_(max_order) {
         detail::require(n_outputs >= 1 && H.rows() % n_outputs == 0 && H.rows() >= 2 * n_outputs,
@@ -35,8 +38,19 @@ public:
         detail::require(max_order <= std::min(H.rows() - n_outputs, H.cols()),
                         "order ", max_order, " is above the largest order the horizons support, min((p-1)*l, q*r) = ",
                         std::min(H.rows() - n_outputs, H.cols()));
+        // Eigen's SVD returns without filling its outputs on non-finite input; never read them then.
+        detail::require(H.allFinite(), "H has non-finite entries: the covariances overflowed (rescale the data)");
         Eigen::BDCSVD<Eigen::MatrixXd> svd(H, Eigen::ComputeThinU | Eigen::ComputeThinV);
+        if (svd.info() != Eigen::Success) throw numerical_error("the SVD of H did not converge");
         s_ = svd.singularValues();
+        // Numerical rank as NumPy's matrix_rank: singular values above max(a, b) eps s_1. Beyond
+        // it, Gamma has zero columns and A is undefined, so the realization stops there.
+        const double tol = static_cast<double>(std::max(H.rows(), H.cols())) *
+                           std::numeric_limits<double>::epsilon() * (s_.size() ? s_(0) : 0.0);
+        rank_ = 0;
+        while (rank_ < s_.size() && s_(rank_) > tol) ++rank_;
+        requested_max_ = n_max_;
+        n_max_ = std::min(n_max_, rank_);
         u_ = svd.matrixU();
         v_ = svd.matrixV();
         // Sign convention (uq-math §5.4): largest-modulus entry of each u_j positive.
@@ -48,6 +62,7 @@ public:
                 v_.col(j) = -v_.col(j);
             }
         }
+        if (n_max_ == 0) return;  // H is zero: nothing to realise (identify reports it)
         gamma_ = u_.leftCols(n_max_) * s_.head(n_max_).cwiseSqrt().asDiagonal();
         const Index rows = H.rows() - l_;
         Eigen::HouseholderQR<Eigen::MatrixXd> qr(gamma_.topRows(rows));
@@ -56,7 +71,11 @@ public:
     }
 
     Index n_outputs() const { return l_; }
+    /// Largest order realised: the requested one, or the numerical rank of H if that is lower.
     Index max_order() const { return n_max_; }
+    Index requested_max_order() const { return requested_max_; }
+    /// Singular values of H above max(a, b) eps s_1 (orders above it have no realization).
+    Index numerical_rank() const { return rank_; }
     const Eigen::VectorXd& singular_values() const { return s_; }  ///< all min(a, b)
     const Eigen::MatrixXd& U() const { return u_; }                ///< a x min(a, b)
     const Eigen::MatrixXd& V() const { return v_; }                ///< b x min(a, b)
@@ -67,7 +86,8 @@ public:
 
     /// (A, C) at order n: C = first l rows of Gamma, A = Gamma_up^+ Gamma_dw (least squares).
     StateSpace system(Index n) const {
-        detail::require(n >= 1 && n <= n_max_, "order ", n, " is outside 1..", n_max_);
+        detail::require(n >= 1 && n <= n_max_, "order ", n, " is outside 1..", n_max_,
+                        n > n_max_ && n <= requested_max_ ? " (above the numerical rank of H)" : "");
         StateSpace ss;
         ss.C = gamma_.topLeftCorner(l_, n);
         ss.A = r_.topLeftCorner(n, n).triangularView<Eigen::Upper>().solve(qt_dw_.topLeftCorner(n, n));
@@ -75,7 +95,7 @@ public:
     }
 
 private:
-    Index l_, n_max_;
+    Index l_, n_max_, requested_max_ = 0, rank_ = 0;
     Eigen::VectorXd s_;
     Eigen::MatrixXd u_, v_, gamma_, r_, qt_dw_;
 };

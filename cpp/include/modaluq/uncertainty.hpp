@@ -366,6 +366,8 @@ public:
     }
 
     Index n_blocks() const { return nb_; }
+    /// Standard deviation of the singular value s_{j+1} of H (j < max_order + 1).
+    double singular_value_std(Index j) const { return dsigma_.row(j).norm(); }
 
     /// Fill the uncertainty fields of `modes` (order n) from its eigenstructure.
     /// @param block_seconds  duration of one block, N_b / fs, for the block-length check

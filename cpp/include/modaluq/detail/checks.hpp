@@ -23,6 +23,21 @@ inline void require_finite(const Eigen::Ref<const Eigen::MatrixXd>& x, const cha
                      std::isnan(x(c, s)) ? "NaN" : "infinite", " (samples must be finite)");
 }
 
-inline Eigen::Index ceil_div(Eigen::Index a, Eigen::Index b) { return a >= 0 ? (a + b - 1) / b : -((-a) / b); }
+/// ceil(a / b) for b > 0, without the overflow of (a + b - 1) / b near the top of the range.
+inline Eigen::Index ceil_div(Eigen::Index a, Eigen::Index b) {
+    const Eigen::Index q = a / b;
+    return (a % b > 0) ? q + 1 : q;
+}
+
+/// Largest size any modaluq array may have (2^50 elements, 8 PiB of doubles). Sizes are
+/// checked against it in floating point before they are formed, so no Index product of
+/// validated sizes can overflow (signed overflow is undefined behaviour).
+inline constexpr double max_elements = 1125899906842624.0;  // 2^50
+
+/// Throw invalid_argument naming `what` when `size` (computed in double) exceeds max_elements.
+inline void require_size(double size, const char* what) {
+    if (!(size <= max_elements))
+        fail(what, " would need ", size, " elements, more than the limit of 2^50: the settings are too large");
+}
 
 }  // namespace modaluq::detail

@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <atomic>
 #include <exception>
+#include <system_error>
 #include <thread>
 #include <vector>
 
@@ -36,7 +37,12 @@ void parallel_for(Index n, Index threads, Fn&& fn) {
     };
     std::vector<std::thread> pool;
     pool.reserve(static_cast<size_t>(nt - 1));
-    for (Index w = 1; w < nt; ++w) pool.emplace_back(worker, w);
+    // A thread the OS refuses (limits, memory) is not an error: the threads already running
+    // and the calling thread share the work, and the results are the same.
+    try {
+        for (Index w = 1; w < nt; ++w) pool.emplace_back(worker, w);
+    } catch (const std::system_error&) {
+    }
     worker(0);
     for (auto& t : pool) t.join();
     for (auto& e : errors)

@@ -1,0 +1,56 @@
+#!/usr/bin/env bash
+# Set up modaluq from this clone on a Debian/Ubuntu machine: the system packages it builds
+# with (apt-get, as root or through sudo), a virtual environment .venv/ beside this file's
+# folder (Debian's Python refuses `pip install` outside one), and the package in it.
+#
+#   bash scripts/setup.sh            # the package with plots, loaders and exports
+#   bash scripts/setup.sh --test     # the same plus what the tests need (doctest, pytest, ...)
+#
+# Environment: MODALUQ_VENV (default .venv), PYTHON (default python3),
+# MODALUQ_NATIVE=ON to compile for this machine's CPU only (-march=native; the default build
+# runs on any x86-64/arm64 CPU, so a wheel copied to another machine does not die of SIGILL).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+extras="plot,io,export"
+apt_pkgs=(g++ make cmake python3-venv python3-dev libeigen3-dev libopenblas-dev)
+if [[ "${1:-}" == "--test" ]]; then
+  extras="all"
+  apt_pkgs+=(doctest-dev)
+fi
+
+missing=()
+for p in "${apt_pkgs[@]}"; do dpkg -s "$p" >/dev/null 2>&1 || missing+=("$p"); done
+if ((${#missing[@]})); then
+  echo "== system packages: ${missing[*]}"
+  sudo_cmd=()
+  if [[ $(id -u) -ne 0 ]]; then sudo_cmd=(sudo); fi
+  export DEBIAN_FRONTEND=noninteractive
+  "${sudo_cmd[@]}" apt-get update -q >/dev/null
+  "${sudo_cmd[@]}" apt-get install -y -q --no-install-recommends "${missing[@]}" >/dev/null
+fi
+
+venv="${MODALUQ_VENV:-.venv}"
+python="${PYTHON:-python3}"
+if [[ ! -x "$venv/bin/python" ]]; then
+  echo "== virtual environment $venv ($("$python" --version))"
+  "$python" -m venv "$venv"
+fi
+"$venv/bin/python" -m pip install -q --upgrade pip
+
+# The C++ extension takes 2-4 minutes and about 2.5 GB of memory to compile; show its steps
+# instead of minutes of silence, and keep the whole log for when it fails.
+log="$venv/modaluq-build.log"
+echo "== building and installing modaluq[$extras] (the C++ extension takes 2-4 minutes; log: $log)"
+native=()
+if [[ "${MODALUQ_NATIVE:-OFF}" == "ON" ]]; then native=(-Ccmake.define.MODALUQ_NATIVE=ON); fi
+"$venv/bin/python" -m pip install -v ".[$extras]" "${native[@]}" >"$log" 2>&1 </dev/null &
+pid=$!
+# Progress: the build's own [k/n] lines as they appear.
+tail -n +1 -f "$log" --pid="$pid" 2>/dev/null | grep --line-buffered -E '^\s*\[[0-9]+/[0-9]+\] (Building|Linking)' \
+  | sed -E 's/^\s*/   /; s/ (CXX|object|shared module) / /g' || true
+if ! wait "$pid"; then
+  echo "pip install failed; the last lines of $log:" >&2
+  tail -n 40 "$log" >&2
+  exit 1
+fi
+echo "== installed: $("$venv/bin/python" -c 'import modaluq; print("modaluq", modaluq.__version__)') in $venv"
