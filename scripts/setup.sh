@@ -37,17 +37,21 @@ if [[ ! -x "$venv/bin/python" ]]; then
 fi
 "$venv/bin/python" -m pip install -q --upgrade pip
 
-# The C++ extension takes 2-4 minutes and about 2.5 GB of memory to compile; show its steps
+# The C++ extension takes 3-6 minutes and about 2.5 GB of memory to compile; show its steps
 # instead of minutes of silence, and keep the whole log for when it fails.
 log="$venv/modaluq-build.log"
-echo "== building and installing modaluq[$extras] (the C++ extension takes 2-4 minutes; log: $log)"
+echo "== building and installing modaluq[$extras] (the C++ extension takes 3-6 minutes; log: $log)"
 native=()
 if [[ "${MODALUQ_NATIVE:-OFF}" == "ON" ]]; then native=(-Ccmake.define.MODALUQ_NATIVE=ON); fi
-"$venv/bin/python" -m pip install -v ".[$extras]" "${native[@]}" >"$log" 2>&1 </dev/null &
+# The build tools live in the venv and the build reuses build/ (pyproject.toml's build-dir), so
+# a second run recompiles only what changed (with pip's isolated build environments the include
+# paths change every time and everything is rebuilt).
+"$venv/bin/python" -m pip install -q "scikit-build-core>=0.10" "pybind11>=2.11" ninja
+"$venv/bin/python" -m pip install -v --no-build-isolation ".[$extras]" "${native[@]}" >"$log" 2>&1 </dev/null &
 pid=$!
 # Progress: the build's own [k/n] lines as they appear.
-tail -n +1 -f "$log" --pid="$pid" 2>/dev/null | grep --line-buffered -E '^\s*\[[0-9]+/[0-9]+\] (Building|Linking)' \
-  | sed -E 's/^\s*/   /; s/ (CXX|object|shared module) / /g' || true
+tail -n +1 -f "$log" --pid="$pid" 2>/dev/null | grep --line-buffered -E '^\s*\[ *[0-9]+(/[0-9]+|%)\] (Building|Linking)' \
+  | sed -u -E 's/^\s*/   /; s/ (CXX|object|shared module) / /g' || true
 if ! wait "$pid"; then
   echo "pip install failed; the last lines of $log:" >&2
   tail -n 40 "$log" >&2

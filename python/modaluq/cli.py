@@ -6,17 +6,89 @@ Errors in the user's input are one line on stderr and exit status 2, never a tra
 from __future__ import annotations
 
 import argparse
+import math
+import os
 import sys
 import time
 import warnings
+from pathlib import Path
 
 import numpy as np
+
+from .identification import MAX_COUNT
 
 __all__ = ["main"]
 
 
-class _CliError(Exception):
-    """A problem with the user's input: printed as one line, exit status 2."""
+class _CliError(ValueError):
+    """A problem with the user's input: printed as one line, exit status 2.
+
+    A ValueError, so that it is caught as one even when this module runs as ``__main__`` (``python
+    -m modaluq.cli``) and the subcommands raise the ``modaluq.cli`` copy of the class.
+    """
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse, but its errors are one line too (no usage block): ``--help`` shows the usage."""
+
+    def error(self, message):
+        self.exit(2, f"{self.prog}: error: {message}\n")
+
+
+def integer_option(minimum: int, maximum: int = MAX_COUNT):
+    """An argparse ``type``: an integer in [minimum, maximum] (argparse names the option)."""
+
+    def parse(text):
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
+        if not minimum <= value <= maximum:
+            raise argparse.ArgumentTypeError(f"must be in [{minimum}, {maximum}]; got {value}")
+        return value
+
+    return parse
+
+
+def real_option(low: float, high: float, *, high_open: bool = False):
+    """An argparse ``type``: a finite number in (low, high] (or (low, high))."""
+
+    def parse(text):
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+        if not (math.isfinite(value) and low < value and (value < high if high_open else value <= high)):
+            raise argparse.ArgumentTypeError(f"must be in ({low:g}, {high:g}{')' if high_open else ']'}; got {text}")
+        return value
+
+    return parse
+
+
+def check_output_paths(outputs, inputs=(), *, overwrite=False) -> None:
+    """Refuse, before any work, output files that would destroy data.
+
+    ``outputs`` are ``(option, path)`` pairs. An output that is one of ``inputs`` (the same file
+    by any path: links, ``./``, another spelling) is refused even with ``--overwrite``; so is
+    one file given for two outputs; an existing file is refused unless ``overwrite``.
+    """
+    def same(a, b):
+        try:
+            return os.path.samefile(a, b)
+        except OSError:  # either does not exist (yet)
+            return Path(a).resolve() == Path(b).resolve()
+
+    seen = []
+    for option, path in outputs:
+        for source in inputs:
+            if same(path, source):
+                raise _CliError(f"{option} {path} is the input file {source}; refusing to overwrite it")
+        for other_option, other in seen:
+            if same(path, other):
+                raise _CliError(f"{option} {path} is also the file of {other_option} {other}")
+        if os.path.lexists(path) and not overwrite:
+            raise _CliError(f"{option} {path} exists; pass --overwrite to replace it")
+        seen.append((option, path))
 
 
 def _modes_vs_truth(modes, true_f, true_xi) -> str:
@@ -70,7 +142,7 @@ def _demo(args) -> int:
 def _parser() -> argparse.ArgumentParser:
     from . import __version__
 
-    p = argparse.ArgumentParser(
+    p = _Parser(
         prog="modaluq",
         description="Modal parameters with their uncertainty from vibration data (covariance-driven SSI).",
     )
@@ -82,11 +154,13 @@ def _parser() -> argparse.ArgumentParser:
                        description="Simulate the 6-DOF mass-spring chain of the reference paper, identify it "
                                    "output-only and input/output at one model order, and print the modes with "
                                    "their standard deviations next to the true values.")
-    d.add_argument("--samples", type=int, default=100_000, help="record length in samples (default 100000)")
-    d.add_argument("--seed", type=int, default=1, help="random seed (default 1)")
-    d.add_argument("--block-rows", type=int, default=15, help="future and past block rows p = q (default 15)")
-    d.add_argument("--order", type=int, default=12, help="model order (default 12)")
-    d.add_argument("--n-blocks", type=int, default=50, help="blocks for the uncertainty (default 50)")
+    d.add_argument("--samples", type=integer_option(1), default=100_000,
+                   help="record length in samples (default 100000)")
+    d.add_argument("--seed", type=integer_option(0), default=1, help="random seed (default 1)")
+    d.add_argument("--block-rows", type=integer_option(2), default=15,
+                   help="future and past block rows p = q (default 15)")
+    d.add_argument("--order", type=integer_option(1), default=12, help="model order (default 12)")
+    d.add_argument("--n-blocks", type=integer_option(2), default=50, help="blocks for the uncertainty (default 50)")
     d.set_defaults(func=_demo)
 
     # Further subcommands register themselves (one module each).
@@ -100,11 +174,19 @@ def _parser() -> argparse.ArgumentParser:
 
 def main(argv=None) -> int:
     parser = _parser()
-    args = parser.parse_args(argv)
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:  # --help, --version, or an argument error already printed as one line
+        return exc.code
     try:
         return args.func(args)
-    except (_CliError, ValueError, TypeError, OSError) as e:
-        print(f"modaluq {args.command}: error: {e}", file=sys.stderr)
+    except (ValueError, TypeError, OSError, ImportError) as e:  # _CliError is a ValueError
+        message = " ".join(str(e).splitlines())  # one line even for a multi-line message
+        print(f"modaluq {args.command}: error: {message}", file=sys.stderr)
+        return 2
+    except MemoryError:
+        print(f"modaluq {args.command}: error: out of memory (fewer orders or block rows, or a shorter record?)",
+              file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("modaluq: interrupted", file=sys.stderr)

@@ -19,12 +19,61 @@ import numpy as np
 
 __all__ = ["parse_orders", "parse_read_options", "register", "run"]
 
+#: Largest --dpi: a 9 x 6 inch diagram is then 10800 x 7200 pixels.
+MAX_DPI = 1200
 
-def parse_orders(text: str) -> list:
+
+#: Largest order :func:`parse_orders` expands when the data are not known: a model of this order
+#: needs a Hankel matrix of more than 10⁵ × 10⁵ entries (80 GB), beyond any machine.
+MAX_ORDER = 100_000
+
+
+def _order_spec(text: str):
+    """``--orders`` as ``(orders, largest)``, a range not expanded, so that nothing is built
+    before the largest order is checked. Raises ``ValueError`` naming ``--orders``."""
+    if not isinstance(text, str):
+        raise TypeError(f"--orders must be a string; got {type(text).__name__}")
+    spec = text.strip()
+
+    def integer(s, what="orders"):
+        try:
+            value = int(s.strip())
+        except ValueError:
+            raise ValueError(f"--orders {text!r}: {s.strip()!r} is not an integer "
+                             "(use a:b:step, a:b, n or a comma list)") from None
+        if value < 1:
+            raise ValueError(f"--orders {text!r}: {what} must be >= 1; got {value}")
+        return value
+
+    if not spec:
+        raise ValueError("--orders must not be empty (use a:b:step, a:b, n or a comma list)")
+    if "," in spec:
+        orders = [integer(s) for s in spec.split(",") if s.strip()]
+        if not orders:
+            raise ValueError(f"--orders {text!r} gives no order")
+        return orders, max(orders)
+    if ":" in spec:
+        parts = spec.split(":")
+        if len(parts) not in (2, 3):
+            raise ValueError(f"--orders {text!r}: expected a:b or a:b:step")
+        a, b = integer(parts[0]), integer(parts[1])
+        step = integer(parts[2], "step") if len(parts) == 3 else 1
+        if b < a:
+            raise ValueError(f"--orders {text!r}: the last order {b} is below the first {a}")
+        orders = range(a, b + 1, step)
+        return orders, orders[-1]
+    order = integer(spec)
+    return [order], order
+
+
+def parse_orders(text: str, max_order: int | None = None, *, bound: str = "") -> list:
     """Parse a model-order specification into a sorted list of distinct positive integers.
 
     ``"a:b:s"`` is ``a, a+s, ...`` up to and **including** ``b``; ``"a:b"`` uses step 1;
-    ``"n"`` is one order; ``"4,8,12"`` is a list. Raises ``ValueError`` naming ``--orders``.
+    ``"n"`` is one order; ``"4,8,12"`` is a list. ``max_order`` is the largest order the
+    settings and the data allow (default :data:`MAX_ORDER`); a larger one is refused before a
+    range is expanded, with ``bound`` (e.g. ``" = min((p-1) l, q r)"``) after the limit in the
+    message. Raises ``ValueError`` naming ``--orders``.
 
     Examples
     --------
@@ -35,39 +84,10 @@ def parse_orders(text: str) -> list:
     >>> parse_orders("4, 8,12")
     [4, 8, 12]
     """
-    if not isinstance(text, str):
-        raise TypeError(f"--orders must be a string; got {type(text).__name__}")
-    spec = text.strip()
-
-    def integer(s):
-        try:
-            return int(s.strip())
-        except ValueError:
-            raise ValueError(f"--orders {text!r}: {s.strip()!r} is not an integer "
-                             "(use a:b:step, a:b, n or a comma list)") from None
-
-    if not spec:
-        raise ValueError("--orders must not be empty (use a:b:step, a:b, n or a comma list)")
-    if "," in spec:
-        orders = [integer(s) for s in spec.split(",") if s.strip()]
-    elif ":" in spec:
-        parts = spec.split(":")
-        if len(parts) not in (2, 3):
-            raise ValueError(f"--orders {text!r}: expected a:b or a:b:step")
-        a, b = integer(parts[0]), integer(parts[1])
-        step = integer(parts[2]) if len(parts) == 3 else 1
-        if step < 1:
-            raise ValueError(f"--orders {text!r}: step must be >= 1; got {step}")
-        if b < a:
-            raise ValueError(f"--orders {text!r}: the last order {b} is below the first {a}")
-        orders = list(range(a, b + 1, step))
-    else:
-        orders = [integer(spec)]
-    if not orders:
-        raise ValueError(f"--orders {text!r} gives no order")
-    bad = [n for n in orders if n < 1]
-    if bad:
-        raise ValueError(f"--orders {text!r}: orders must be >= 1; got {bad[0]}")
+    orders, largest = _order_spec(text)
+    limit = MAX_ORDER if max_order is None else max_order
+    if largest > limit:
+        raise ValueError(f"--orders {text!r}: order {largest} is above the largest possible, {limit}{bound}")
     return sorted(set(orders))
 
 
@@ -117,17 +137,24 @@ def parse_read_options(items) -> dict:
 
 
 def _check_outputs(args):
-    """Fail fast (before any computation) on an unsupported or unwritable output path."""
-    from .export import EXTENSIONS
+    """Fail fast (before any computation) on an unsupported, unwritable or destructive output path."""
+    from .cli import check_output_paths
+    from .export import EXTENSIONS, require
 
     for p in args.out or []:
-        if Path(p).suffix.lower() not in EXTENSIONS:
+        kind = EXTENSIONS.get(Path(p).suffix.lower())
+        if kind is None:
             raise ValueError(f"--out {p}: unsupported extension; use one of {', '.join(EXTENSIONS)}")
-    paths = list(args.out or []) + [p for p in (args.plot, args.plot_shapes) if p]
-    for p in paths:
+        if kind == "netcdf":
+            for module in ("xarray", "netCDF4"):
+                require(module, f"--out {p}")
+    outputs = [("--out", p) for p in args.out or []]
+    outputs += [(opt, p) for opt, p in (("--plot", args.plot), ("--plot-shapes", args.plot_shapes)) if p]
+    for _, p in outputs:
         parent = Path(p).resolve().parent
         if not parent.is_dir():
             raise OSError(f"{p}: directory {parent} does not exist")
+    check_output_paths(outputs, [args.file], overwrite=args.overwrite)
     for opt, p in (("--plot", args.plot), ("--plot-shapes", args.plot_shapes)):
         if p:
             try:
@@ -139,12 +166,22 @@ def _check_outputs(args):
                 raise ValueError(f"{opt} {p}: unsupported image type {ext or '(none)'!r}; use e.g. .png, .pdf, .svg")
 
 
-def _default_orders(block_rows, past_block_rows, n_outputs, n_references):
-    q = past_block_rows or block_rows
-    top = min(80, (block_rows - 1) * n_outputs, q * n_references)
+def _largest_order(block_rows, past_block_rows, n_samples, n_outputs, n_references):
+    """The largest model order min((p-1) l, q r) and how it comes about (for messages)."""
+    p, q = block_rows, past_block_rows or block_rows
+    if p + q > n_samples:  # checked here so that no bound derived from absurd horizons is used
+        raise ValueError(f"--block-rows {p} with --past-block-rows {q}: p + q = {p + q} exceeds the "
+                         f"{n_samples} samples of the record")
+    top = min((p - 1) * n_outputs, q * n_references)
+    return top, (f" = min((p-1)·l, q·r) = min({p - 1}·{n_outputs}, {q}·{n_references}) for --block-rows {p}, "
+                 f"--past-block-rows {q}, {n_outputs} outputs and {n_references} references")
+
+
+def _default_orders(block_rows, largest):
+    top = min(80, largest)
     top -= top % 2
     if top < 2:
-        raise ValueError(f"--block-rows {block_rows} is too small for {n_outputs} output(s): no even model "
+        raise ValueError(f"--block-rows {block_rows} is too small: the largest model order is {largest}, no even "
                          "order fits; increase --block-rows or give --orders")
     return list(range(2, top + 1, 2))
 
@@ -183,7 +220,8 @@ def run(args) -> int:
     except ValueError as exc:  # "min_mac must be ..." -> "--min-mac must be ..."
         param, _, rest = str(exc).partition(" ")
         raise ValueError(f"--{param.replace('_', '-')} {rest}") from None
-    orders = parse_orders(args.orders) if args.orders is not None else None
+    if args.orders is not None:
+        _order_spec(args.orders)  # syntax, before the data are loaded; the bound needs them
     read_options = parse_read_options(args.read_option)
 
     n_steps = 4 + bool(args.plot) + bool(args.plot_shapes) + len(args.out or [])
@@ -218,9 +256,12 @@ def run(args) -> int:
         out_names = [names[k] for k in out_idx]
         in_names = [names[k] for k in in_idx]
         refs = _resolve_channels(args.references, out_names, "--references") if args.references else None
-        if orders is None:
-            orders = _default_orders(args.block_rows, args.past_block_rows, len(out_idx),
-                                     len(refs) if refs else len(out_idx))
+        largest, bound = _largest_order(args.block_rows, args.past_block_rows, rec.n_samples, len(out_idx),
+                                        len(refs) if refs else len(out_idx))
+        if args.orders is None:
+            orders = _default_orders(args.block_rows, largest)
+        else:
+            orders = parse_orders(args.orders, largest, bound=bound)
         progress.update()
 
         # ------------------------------------------------------------------ identify
@@ -318,6 +359,8 @@ def run(args) -> int:
 
 def register(subparsers) -> argparse.ArgumentParser:
     """Add the ``identify`` subcommand to the ``modaluq`` command line."""
+    from .cli import integer_option, real_option
+
     p = subparsers.add_parser(
         "identify",
         help="identify modes with their uncertainty from a measurement file",
@@ -343,13 +386,14 @@ def register(subparsers) -> argparse.ArgumentParser:
     g.add_argument("--outputs", nargs="+", metavar="CH", default=None,
                    help="output channels (default: every channel that is not an input)")
     g = p.add_argument_group("identification")
-    g.add_argument("--block-rows", type=int, default=20, metavar="P",
+    g.add_argument("--block-rows", type=integer_option(2), default=20, metavar="P",
                    help="future block rows p (default 20); the largest order is (p-1) x n_outputs")
-    g.add_argument("--past-block-rows", type=int, default=None, metavar="Q", help="past block rows q (default p)")
+    g.add_argument("--past-block-rows", type=integer_option(1), default=None, metavar="Q",
+                   help="past block rows q (default p)")
     g.add_argument("--orders", default=None, metavar="SPEC",
                    help="model orders: a:b:step (b included), a:b, n or a comma list "
                         "(default 2:M:2, M = min(80, (p-1) n_outputs, q n_references))")
-    g.add_argument("--n-blocks", type=int, default=50, metavar="NB",
+    g.add_argument("--n-blocks", type=integer_option(2), default=50, metavar="NB",
                    help="blocks for the covariance of the uncertainty (default 50)")
     g.add_argument("--references", nargs="+", metavar="CH", default=None,
                    help="reference outputs of the past data matrix (default: all outputs)")
@@ -369,16 +413,19 @@ def register(subparsers) -> argparse.ArgumentParser:
                    help="reject poles with a damping ratio above this (default 0.20)")
     g.add_argument("--distance-threshold", type=float, default=0.02,
                    help="clustering cut on |df|/f + (1 - MAC) (default 0.02)")
-    g.add_argument("--min-cluster-size", type=int, default=None, metavar="N",
+    g.add_argument("--min-cluster-size", type=integer_option(1), default=None, metavar="N",
                    help="poles a mode needs (default: a quarter of the orders, at least 3)")
     g = p.add_argument_group("output")
     g.add_argument("--plot", metavar="IMAGE", default=None,
                    help="write the stabilization diagram over the output spectrum (.png, .pdf, .svg ...)")
     g.add_argument("--plot-shapes", metavar="IMAGE", default=None, help="write the selected mode shapes with ±1σ")
-    g.add_argument("--dpi", type=float, default=120, help="resolution of raster images (default 120)")
+    g.add_argument("--dpi", type=real_option(0, MAX_DPI), default=120,
+                   help=f"resolution of raster images (default 120, at most {MAX_DPI})")
     g.add_argument("--out", action="append", metavar="PATH", default=None,
                    help="write a report; .json (modes, sigma, spread, provenance stamp), .csv (modes) "
                         "or .nc (full diagram, NetCDF); repeat for several")
+    g.add_argument("--overwrite", action="store_true",
+                   help="replace existing output files (the input file is never overwritten)")
     g.add_argument("--no-progress", action="store_true", help="no progress display on stderr")
     p.set_defaults(func=run)
     return p

@@ -10,7 +10,7 @@
   the stamp as global attributes.
 
 >>> from modaluq import export                                          # doctest: +SKIP
->>> stamp = export.provenance("run1.csv", settings={"identification": result.settings})
+>>> stamp = export.provenance("run1.csv", settings={"identification": result.settings})  # doctest: +SKIP
 >>> export.write("modes.json", diagram, selected, stamp=stamp)          # doctest: +SKIP
 """
 
@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import datetime
 import hashlib
+import importlib
 import json
 import os
 import platform
@@ -25,11 +26,28 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["EXTENSIONS", "file_sha256", "provenance", "report", "write", "write_csv", "write_json",
+__all__ = ["EXTENSIONS", "file_sha256", "provenance", "report", "require", "write", "write_csv", "write_json",
            "write_netcdf"]
 
 #: file extension -> what :func:`write` writes
 EXTENSIONS = {".json": "json", ".csv": "csv", ".nc": "netcdf", ".nc4": "netcdf"}
+
+#: optional dependency -> the extra of modaluq that installs it
+EXTRAS = {"xarray": "export", "netCDF4": "export"}
+
+
+def require(module: str, purpose: str = "this"):
+    """Import an optional dependency, or raise an ImportError that says which extra installs it.
+
+    modaluq is installed from its source tree (it is not on the package index), hence the
+    ``pip install ".[extra]"`` in the message.
+    """
+    try:
+        return importlib.import_module(module)
+    except ImportError as exc:
+        extra = EXTRAS.get(module, "all")
+        raise ImportError(f"{purpose} needs {module}, which is not installed: run pip install \".[{extra}]\" "
+                          f"in the modaluq source directory (or pip install {module})") from exc
 
 
 def file_sha256(path, chunk_bytes: int = 1 << 20) -> str:
@@ -142,6 +160,7 @@ def write_csv(path, selected) -> Path:
 
 def write_netcdf(path, diagram, selected=None, *, stamp: dict | None = None) -> Path:
     """Write the full diagram (every pole, status, reason, σ) and the selected modes to NetCDF-4."""
+    require("netCDF4", "writing NetCDF")  # xarray's own message would name an "engine", not the package
     path = Path(path)
     ds = diagram.to_xarray(selected, attrs={"stamp": json.dumps(_jsonable(stamp or provenance()))})
     ds.to_netcdf(path, engine="netcdf4")

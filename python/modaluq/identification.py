@@ -335,7 +335,7 @@ class Result:
         """
         diagram = self.stabilization_diagram(criteria)
         selected = None
-        if select:
+        if _boolean("select", select):
             from .stabilization import select_modes
 
             selected = select_modes(diagram)
@@ -457,8 +457,8 @@ def identify(y, u=None, *, fs: float, block_rows: int, past_block_rows: int | No
     >>> sim = modaluq.simulate(20_000, seed=1)
     >>> result = modaluq.identify(sim.y, sim.u, fs=sim.fs, block_rows=15, orders=12)
     >>> modes = result.at_order(12)
-    >>> [round(f, 1) for f in modes.frequency_hz]
-    [1.9, 5.6, 8.7, 14.5, 15.9, 17.0]
+    >>> [round(float(f), 1) for f in modes.frequency_hz]
+    [1.9, 5.6, 8.7, 14.5, 15.8, 17.0]
     """
     o = core_options(fs=fs, block_rows=block_rows, past_block_rows=past_block_rows, orders=orders,
                      n_blocks=n_blocks, references=references, uncertainty=uncertainty, demean=demean,

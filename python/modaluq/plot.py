@@ -1,8 +1,10 @@
 """Plots: stabilization diagram (paper Figure 3) and mode shapes, each with ±1σ error bars.
 
-matplotlib is imported inside the functions (optional dependency, extra ``plot``); everything
-works with the non-interactive Agg backend. Each function draws into the given Axes/Figure or a
-new one and returns the :class:`matplotlib.figure.Figure`; nothing is shown or saved.
+Each function draws into the given Axes/Figure or a new one and returns the
+:class:`matplotlib.figure.Figure`; nothing is shown or saved. A new figure is not registered with
+pyplot: plotting in a loop does not pile up open figures and no GUI backend is started. It saves
+with ``fig.savefig`` and displays in Jupyter like any figure; for a window, draw into Axes made
+by pyplot (``fig, ax = plt.subplots(); result.plot(ax)``).
 
 >>> import modaluq                                                     # doctest: +SKIP
 >>> diagram = modaluq.stabilization_diagram(result)                    # doctest: +SKIP
@@ -12,7 +14,12 @@ new one and returns the :class:`matplotlib.figure.Figure`; nothing is shown or s
 
 from __future__ import annotations
 
+import io
+
 import numpy as np
+from matplotlib.figure import Figure
+
+from .identification import _boolean, _integer
 
 __all__ = ["STATUS_STYLE", "mode_shapes", "stabilization_diagram"]
 
@@ -25,12 +32,21 @@ STATUS_STYLE = {
 }
 
 
-def _axes(ax, figsize):
-    import matplotlib.pyplot as plt
+class StandaloneFigure(Figure):
+    """A Figure pyplot does not know: nothing to close, nothing piles up in loops."""
 
+    def _repr_png_(self):
+        # Jupyter shows a Figure through the formatter pyplot's inline backend registers; without
+        # pyplot imported there is none, and this makes the figure show anyway.
+        buf = io.BytesIO()
+        self.savefig(buf, format="png", bbox_inches="tight")
+        return buf.getvalue()
+
+
+def _axes(ax, figsize):
     if ax is None:
-        fig, ax = plt.subplots(figsize=figsize, layout="constrained")
-        return fig, ax
+        fig = StandaloneFigure(figsize=figsize, layout="constrained")
+        return fig, fig.add_subplot()
     return ax.figure, ax
 
 
@@ -78,6 +94,7 @@ def stabilization_diagram(diagram, ax=None, *, y=None, spectrum=None, selected=N
         raise TypeError(f"diagram must be a modaluq Diagram; got {type(diagram).__name__}")
     if y is not None and spectrum is not None:
         raise TypeError("pass y or spectrum, not both")
+    show_rejected = _boolean("show_rejected", show_rejected)
     fig, ax = _axes(ax, figsize)
 
     spec_ax = None
@@ -171,16 +188,12 @@ def mode_shapes(modes, fig=None, *, channel_positions=None, ncols=3, figsize=Non
         x = np.asarray(channel_positions, dtype=float)
         if x.shape != (n_out,):
             raise ValueError(f"channel_positions must have {n_out} entries; got shape {x.shape}")
-    if not isinstance(ncols, int) or ncols < 1:
-        raise ValueError(f"ncols must be a positive integer; got {ncols!r}")
-    ncols = max(1, min(ncols, n_modes))
+    ncols = max(1, min(_integer("ncols", ncols, minimum=1), n_modes))
     nrows = max(1, -(-n_modes // ncols))
     if figsize is None:
         figsize = (3.4 * ncols, 2.6 * nrows + 0.3)
     if fig is None:
-        import matplotlib.pyplot as plt
-
-        fig = plt.figure(figsize=figsize, layout="constrained")
+        fig = StandaloneFigure(figsize=figsize, layout="constrained")
     else:
         fig.clear()
     if n_modes == 0:

@@ -32,13 +32,16 @@ numbers.
 from __future__ import annotations
 
 import math
-import numbers
 import warnings
 from dataclasses import dataclass
+
+from typing import Iterable
 
 import numpy as np
 import scipy.linalg
 import scipy.signal
+
+from .identification import _integer, _real, _sampling_frequency, as_samples
 
 __all__ = [
     "Simulation",
@@ -60,30 +63,12 @@ _CHUNK_SAMPLES = 1 << 16
 # --------------------------------------------------------------------------- validation
 
 
-def _positive_int(name, value, *, allow_zero=False):
-    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Integral):
-        raise ValueError(f"{name} must be an integer, got {value!r}")
-    value = int(value)
-    if value < 0 or (value == 0 and not allow_zero):
-        kind = "a non-negative" if allow_zero else "a positive"
-        raise ValueError(f"{name} must be {kind} integer, got {value}")
-    return value
-
-
-def _positive_float(name, value, *, allow_zero=False):
-    try:
-        out = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a real number, got {value!r}") from None
-    if not math.isfinite(out) or out < 0 or (out == 0 and not allow_zero):
-        kind = "non-negative" if allow_zero else "positive"
-        raise ValueError(f"{name} must be a finite {kind} number, got {value!r}")
-    return out
-
-
 def _per_dof(name, value, n, *, lower, upper=math.inf, closed_lower=False):
     """Broadcast a scalar or length-n sequence to an (n,) float array and check its range."""
-    arr = np.asarray(value, dtype=np.float64)
+    arr = np.asarray(value)
+    if arr.dtype.kind not in "iuf":  # strings would convert; booleans are no masses
+        raise TypeError(f"{name} must be a real number or {n} real numbers, got {value!r}")
+    arr = arr.astype(np.float64)
     if arr.ndim == 0:
         arr = np.full(n, float(arr))
     if arr.shape != (n,):
@@ -96,18 +81,15 @@ def _per_dof(name, value, n, *, lower, upper=math.inf, closed_lower=False):
 
 
 def _dof_tuple(name, dofs, n_dof, *, allow_empty):
-    try:
-        items = tuple(dofs)
-    except TypeError:
-        raise ValueError(f"{name} must be a sequence of DOF indices, got {dofs!r}") from None
+    if isinstance(dofs, (str, bytes)) or not isinstance(dofs, Iterable):
+        raise TypeError(f"{name} must be a sequence of DOF indices, got {dofs!r}")
     out = []
-    for d in items:
-        if isinstance(d, (bool, np.bool_)) or not isinstance(d, numbers.Integral):
-            raise ValueError(f"{name} must contain integers, got {d!r}")
-        if not 0 <= int(d) < n_dof:
-            raise ValueError(f"{name} entry {int(d)} is out of range for n_dof={n_dof} "
+    for d in dofs:
+        d = _integer(name, d)
+        if not 0 <= d < n_dof:
+            raise ValueError(f"{name} entry {d} is out of range for n_dof={n_dof} "
                              f"(valid: 0 .. {n_dof - 1})")
-        out.append(int(d))
+        out.append(d)
     if not out and not allow_empty:
         raise ValueError(f"{name} must not be empty")
     if len(set(out)) != len(out):
@@ -167,7 +149,7 @@ def chain_system(n_dof=6, *, mass=1 / 20, stiffness=None, damping_ratio=0.02):
     >>> np.round(np.sqrt(scipy.linalg.eigvalsh(K, M)) / (2 * np.pi), 4)
     array([ 1.9297,  5.618 ,  8.6824, 14.4938, 15.8462, 17.0114])
     """
-    n_dof = _positive_int("n_dof", n_dof)
+    n_dof = _integer("n_dof", n_dof, minimum=1)
     m = _per_dof("mass", mass, n_dof, lower=0.0)
     if stiffness is None:
         k = np.where(np.arange(n_dof) % 2 == 0, 100.0, 200.0)
@@ -229,7 +211,7 @@ def state_space(M, K, Cdamp, *, fs, output_dofs):
     """
     M, K, Cdamp = _system_matrices(M, K, Cdamp)
     n_dof = M.shape[0]
-    fs = _positive_float("fs", fs)
+    fs = _sampling_frequency(fs)
     output_dofs = _dof_tuple("output_dofs", output_dofs, n_dof, allow_empty=False)
     Ac, Bc = _continuous(M, K, Cdamp)
     n = 2 * n_dof
@@ -429,11 +411,9 @@ def acceleration_response(force, M, K, Cdamp, *, fs, output_dofs):
     """
     M, K, Cdamp = _system_matrices(M, K, Cdamp)
     n_dof = M.shape[0]
-    fs = _positive_float("fs", fs)
+    fs = _sampling_frequency(fs)
     output_dofs = _dof_tuple("output_dofs", output_dofs, n_dof, allow_empty=False)
-    force = np.asarray(force, dtype=np.float64)
-    if force.ndim != 2 or force.shape[1] != n_dof:
-        raise ValueError(f"force must have shape (n_samples, {n_dof}), got {force.shape}")
+    force = as_samples(force, "force", n_channels=n_dof)
     y = np.empty((force.shape[0], len(output_dofs)))
     _ModalPlan(M, K, Cdamp, fs, output_dofs).run(_chunks_of(force), y)
     return y
@@ -454,7 +434,7 @@ def default_output_dofs(n_dof):
     >>> default_output_dofs(10)
     (0, 2, 3, 5, 6, 8, 9)
     """
-    n_dof = _positive_int("n_dof", n_dof)
+    n_dof = _integer("n_dof", n_dof, minimum=1)
     if n_dof == 6:
         return PAPER_OUTPUT_DOFS
     n_out = min(n_dof, math.ceil(2 * n_dof / 3))
@@ -590,14 +570,13 @@ def simulate(n_samples=10_000, *, seed=None, n_dof=6, output_dofs=None, input_do
     >>> np.round(sim.frequency_hz, 3)
     array([ 1.93 ,  5.618,  8.682, 14.494, 15.846, 17.011])
     """
-    n_samples = _positive_int("n_samples", n_samples)
-    n_dof = _positive_int("n_dof", n_dof)
-    fs = _positive_float("fs", fs)
-    input_std = _positive_float("input_std", input_std)
-    unknown_input_std = _positive_float("unknown_input_std", unknown_input_std,
-                                        allow_zero=True)
-    noise_std = _positive_float("noise_std", noise_std, allow_zero=True)
-    discard = _positive_int("discard", discard, allow_zero=True)
+    n_samples = _integer("n_samples", n_samples, minimum=1)
+    n_dof = _integer("n_dof", n_dof, minimum=1)
+    fs = _sampling_frequency(fs)
+    input_std = _real("input_std", input_std, low=0.0, low_open=True)
+    unknown_input_std = _real("unknown_input_std", unknown_input_std, low=0.0)
+    noise_std = _real("noise_std", noise_std, low=0.0)
+    discard = _integer("discard", discard, minimum=0)
     if output_dofs is None:
         output_dofs = default_output_dofs(n_dof)
     output_dofs = _dof_tuple("output_dofs", output_dofs, n_dof, allow_empty=False)

@@ -33,10 +33,11 @@ from __future__ import annotations
 
 import enum
 import math
-import numbers
 from dataclasses import dataclass, field, fields
 
 import numpy as np
+
+from .identification import _integer, _real
 
 __all__ = [
     "ClusteringSettings",
@@ -76,21 +77,6 @@ class PoleStatus(str, enum.Enum):
 
 
 # --------------------------------------------------------------------------- helpers
-
-
-def _real(name, value, *, low=None, high=None, low_open=False, allow_none=False):
-    if value is None and allow_none:
-        return None
-    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
-        raise TypeError(f"{name} must be a real number; got {value!r}")
-    value = float(value)
-    if not math.isfinite(value):
-        raise ValueError(f"{name} must be finite; got {value}")
-    if low is not None and (value < low or (low_open and value == low)):
-        raise ValueError(f"{name} must be {'>' if low_open else '>='} {low}; got {value}")
-    if high is not None and value > high:
-        raise ValueError(f"{name} must be <= {high}; got {value}")
-    return value
 
 
 def modal_assurance_criterion(shape_a, shape_b) -> np.ndarray:
@@ -245,11 +231,7 @@ class ClusteringSettings:
     def __post_init__(self):
         _real("distance_threshold", self.distance_threshold, low=0, low_open=True)
         if self.min_cluster_size is not None:
-            if isinstance(self.min_cluster_size, (bool, np.bool_)) or \
-                    not isinstance(self.min_cluster_size, numbers.Integral):
-                raise TypeError(f"min_cluster_size must be an integer or None; got {self.min_cluster_size!r}")
-            if self.min_cluster_size < 1:
-                raise ValueError(f"min_cluster_size must be >= 1; got {self.min_cluster_size}")
+            _integer("min_cluster_size", self.min_cluster_size, minimum=1)
         _real("min_cluster_fraction", self.min_cluster_fraction, low=0, high=1, low_open=True)
         if isinstance(self.statuses, (str, PoleStatus)):
             object.__setattr__(self, "statuses", (self.statuses,))
@@ -368,7 +350,9 @@ class Diagram:
         """
         import json
 
-        import xarray as xr
+        from .export import require
+
+        xr = require("xarray", "Diagram.to_xarray")
 
         pole_vars = {
             "order": (("pole",), self.order, {"long_name": "model order"}),
@@ -901,10 +885,8 @@ def output_spectrum_singular_values(y, fs: float, *, nperseg: int | None = None)
     if nperseg is None:
         nperseg = int(2 ** round(math.log2(max(n / 64, 1))))
         nperseg = min(max(nperseg, 256), 8192, n)
-    elif isinstance(nperseg, (bool, np.bool_)) or not isinstance(nperseg, numbers.Integral):
-        raise TypeError(f"nperseg must be an integer; got {nperseg!r}")
-    elif not 2 <= nperseg <= n:
-        raise ValueError(f"nperseg must be in [2, n_samples={n}]; got {nperseg}")
+    else:  # at most the record: scipy would shorten it silently
+        nperseg = _integer("nperseg", nperseg, minimum=2, maximum=n)
     y = y - y.mean(axis=0)
     freq, g = scipy.signal.csd(y[:, :, None], y[:, None, :], fs=fs, nperseg=int(nperseg), axis=0)
     # g has shape (n_freq, l, l)

@@ -137,6 +137,19 @@ inline Naive naive_covariances(MatrixXd y, MatrixXd u, const modaluq::HankelLayo
     return nv;
 }
 
+/// IdentifyOptions with the settings the tests vary.
+inline modaluq::IdentifyOptions options(double fs, Index p, Index q, std::vector<Index> orders, bool unc = false,
+                                        Index nb = 10) {
+    modaluq::IdentifyOptions o;
+    o.fs = fs;
+    o.block_rows = p;
+    o.past_block_rows = q;
+    o.orders = std::move(orders);
+    o.uncertainty = unc;
+    o.n_blocks = nb;
+    return o;
+}
+
 inline double rel(const MatrixXd& a, const MatrixXd& b) { return (a - b).norm() / std::max(b.norm(), 1e-300); }
 
 inline MatrixXd kron(const MatrixXd& A, const MatrixXd& B) {

@@ -4,21 +4,6 @@
 
 using namespace support;
 
-namespace {
-
-modaluq::IdentifyOptions options(double fs, Index p, Index q, std::vector<Index> orders, bool unc = false,
-                                 Index nb = 10) {
-    modaluq::IdentifyOptions o;
-    o.fs = fs;
-    o.block_rows = p;
-    o.past_block_rows = q;
-    o.orders = std::move(orders);
-    o.uncertainty = unc;
-    o.n_blocks = nb;
-    return o;
-}
-
-}  // namespace
 
 TEST_CASE("noise-free 2-DOF systems are identified exactly") {
     SUBCASE("input/output, white input, no unknown input or noise") {

@@ -173,3 +173,159 @@ def test_missing_file_is_one_line(capsys, tmp_path):
     assert main(["identify", str(tmp_path / "nothere.csv")]) == 2
     err = capsys.readouterr().err
     assert len(err.strip().splitlines()) == 1 and "no such file" in err
+
+
+# --------------------------------------------------------------------------- issue #13: outputs never destroy data
+
+
+def _one_line_error(capsys, status):
+    out, err = capsys.readouterr()
+    assert status == 2, err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in err, err
+    return lines[0]
+
+
+def _sha256(path):
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+@pytest.fixture()
+def small_csv(tmp_path):
+    return write_chain_csv(tmp_path / "rec.csv", modaluq.simulate(20_000, seed=5))
+
+
+FAST_ARGS = ["--inputs", "force", "--block-rows", "10", "--orders", "2:16:2", "--n-blocks", "20", "--no-progress"]
+
+
+@pytest.mark.parametrize("option,spelling", [
+    ("--out", "rec.csv"), ("--out", "./rec.csv"), ("--out", "sub/../rec.csv"), ("--plot", "rec.csv"),
+    ("--plot-shapes", "rec.csv"), ("--out", "link.csv"),
+])
+@pytest.mark.parametrize("overwrite", [[], ["--overwrite"]])
+def test_the_input_file_is_never_overwritten(small_csv, monkeypatch, capsys, option, spelling, overwrite):
+    monkeypatch.chdir(small_csv.parent)
+    (small_csv.parent / "sub").mkdir()
+    os.symlink(small_csv, small_csv.parent / "link.csv")
+    before = _sha256(small_csv)
+    err = _one_line_error(capsys, main(["identify", "rec.csv", option, spelling, *FAST_ARGS, *overwrite]))
+    assert err == f"modaluq identify: error: {option} {spelling} is the input file rec.csv; refusing to overwrite it"
+    assert _sha256(small_csv) == before
+
+
+def test_hard_linked_input_is_recognised(small_csv, capsys):
+    link = small_csv.parent / "same.csv"
+    os.link(small_csv, link)
+    err = _one_line_error(capsys, main(["identify", str(small_csv), "--out", str(link), "--overwrite", *FAST_ARGS]))
+    assert "is the input file" in err
+
+
+def test_existing_output_needs_overwrite(small_csv, capsys):
+    out = small_csv.parent / "modes.json"
+    out.write_text("an earlier report\n")
+    err = _one_line_error(capsys, main(["identify", str(small_csv), "--out", str(out), *FAST_ARGS]))
+    assert err == f"modaluq identify: error: --out {out} exists; pass --overwrite to replace it"
+    assert out.read_text() == "an earlier report\n"
+    assert main(["identify", str(small_csv), "--out", str(out), "--overwrite", *FAST_ARGS]) == 0
+    assert json.loads(out.read_text())["modes"]
+
+
+def test_existing_plot_needs_overwrite(small_csv, capsys):
+    pytest.importorskip("matplotlib")
+    png = small_csv.parent / "d.png"
+    png.write_bytes(b"old")
+    err = _one_line_error(capsys, main(["identify", str(small_csv), "--plot", str(png), *FAST_ARGS]))
+    assert f"--plot {png} exists; pass --overwrite" in err
+    assert png.read_bytes() == b"old"
+
+
+def test_one_file_for_two_outputs_is_refused(small_csv, capsys, monkeypatch):
+    monkeypatch.chdir(small_csv.parent)
+    err = _one_line_error(capsys, main(["identify", "rec.csv", "--out", "m.json", "--out", "./m.json", *FAST_ARGS]))
+    assert err.endswith("--out ./m.json is also the file of --out m.json")
+    assert not (small_csv.parent / "m.json").exists()
+
+
+def test_validate_refuses_to_overwrite_an_earlier_run(tmp_path, capsys):
+    out = tmp_path / "mc"
+    out.mkdir()
+    (out / "report.md").write_text("earlier\n")
+    argv = ["validate", "--records", "2", "--samples", "3000", "--processes", "1", "--no-progress", "--out", str(out)]
+    err = _one_line_error(capsys, main(argv))
+    assert f"--out {out / 'report.md'} exists; pass --overwrite" in err
+    assert (out / "report.md").read_text() == "earlier\n"
+
+
+# --------------------------------------------------------------------------- issue #13: ranges before expansion
+
+
+@pytest.mark.parametrize("spec", ["1:1000000000000", "2:100000000:2", "99999999999999999999999", "2,4,1000000"])
+def test_orders_out_of_range_are_refused_at_once_with_the_largest_possible(small_csv, capsys, spec):
+    import time
+
+    t0 = time.perf_counter()
+    status = main(["identify", str(small_csv), "--inputs", "force", "--block-rows", "10", "--orders", spec,
+                   "--no-progress"])
+    err = _one_line_error(capsys, status)
+    assert time.perf_counter() - t0 < 10
+    # 3 outputs, p = q = 10: min((p-1) l, q r) = min(27, 30)
+    assert f"--orders '{spec}': order " in err and "above the largest possible, 27 = min((p-1)·l, q·r)" in err
+
+
+def test_parse_orders_refuses_before_expanding():
+    with pytest.raises(ValueError, match=r"order 1000000000000 is above the largest possible, 100000"):
+        parse_orders("1:1000000000000")
+    with pytest.raises(ValueError, match=r"order 60 is above the largest possible, 57 because"):
+        parse_orders("2:60:2", 57, bound=" because")
+    assert parse_orders("2:56:2", 57)[-1] == 56
+
+
+@pytest.mark.parametrize("argv,match", [
+    (["--block-rows", str(2**63)], f"argument --block-rows: must be in [2, 2147483647]; got {2**63}"),
+    (["--block-rows", "x"], "argument --block-rows: 'x' is not an integer"),
+    (["--past-block-rows", str(10**30)], "argument --past-block-rows: must be in [1, "),
+    (["--n-blocks", str(10**18)], "argument --n-blocks: must be in [2, "),
+    (["--min-cluster-size", str(2**64)], "argument --min-cluster-size: must be in [1, "),
+    (["--dpi", "1e7"], "argument --dpi: must be in (0, 1200]; got 1e7"),
+    (["--dpi", "nan"], "argument --dpi: must be in (0, 1200]; got nan"),
+    (["--block-rows", "15000"], "--block-rows 15000 with --past-block-rows 15000: p + q = 30000 exceeds the 20000 "
+                                "samples of the record"),
+])
+def test_integer_options_are_capped_naming_the_option(small_csv, capsys, argv, match):
+    err = _one_line_error(capsys, main(["identify", str(small_csv), "--inputs", "force", "--no-progress", *argv]))
+    assert err.startswith("modaluq identify: error: ") and match in err
+
+
+@pytest.mark.parametrize("argv,match", [
+    (["--processes", str(10**6)], "argument --processes: must be in [1, 256]"),
+    (["--records", str(2**63)], "argument --records: must be in [1, "),
+    (["--tolerance", "1"], "argument --tolerance: must be in (0, 1); got 1"),
+    (["--seed", "-1"], "argument --seed: must be in [0, "),
+])
+def test_validate_options_are_capped_naming_the_option(capsys, argv, match):
+    err = _one_line_error(capsys, main(["validate", "--no-progress", *argv]))
+    assert err.startswith("modaluq validate: error: ") and match in err
+
+
+def test_missing_command_and_bad_demo_option_are_one_line(capsys):
+    assert _one_line_error(capsys, main([])) == "modaluq: error: the following arguments are required: COMMAND"
+    assert "argument --samples: must be in [1, " in _one_line_error(capsys, main(["demo", "--samples", "0"]))
+    assert _one_line_error(capsys, main(["identify", "x.csv", "--bogus"])) == \
+        "modaluq: error: unrecognized arguments: --bogus"
+
+
+def test_netcdf_output_without_xarray_is_refused_before_the_work(small_csv, capsys, monkeypatch):
+    monkeypatch.setitem(sys.modules, "xarray", None)
+    nc = small_csv.parent / "d.nc"
+    err = _one_line_error(capsys, main(["identify", str(small_csv), "--out", str(nc), *FAST_ARGS]))
+    assert f"--out {nc} needs xarray, which is not installed" in err and 'pip install ".[export]"' in err
+    assert not nc.exists()
+
+
+def test_errors_are_one_line_when_run_as_a_module(small_csv):
+    # python -m modaluq.cli: the subcommands raise modaluq.cli's error class, not __main__'s
+    proc = subprocess.run([sys.executable, "-m", "modaluq.cli", "identify", str(small_csv), "--out", str(small_csv)],
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2
+    assert proc.stderr.strip().splitlines() == [
+        f"modaluq identify: error: --out {small_csv} is the input file {small_csv}; refusing to overwrite it"]

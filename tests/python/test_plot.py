@@ -138,3 +138,52 @@ def test_result_plot_draws_the_diagram_with_selected_modes(tmp_path):
     ref = diagram.plot(y=sim.y, selected=res.select_modes())
     assert len(fig.axes[0].lines) == len(ref.axes[0].lines)
     assert len(fig.axes[0].collections) == len(ref.axes[0].collections)
+
+
+# --------------------------------------------------------------------------- issue #13: no pyplot state
+
+
+def test_plots_do_not_pile_up_in_pyplot(small_chain, tmp_path):
+    sim, d, sel = small_chain
+    plt.close("all")
+    result = modaluq.identify(sim.y[:5000], fs=sim.fs, block_rows=8, orders=range(2, 13, 2), n_blocks=10)
+    before = plt.get_fignums()
+    for _ in range(5):
+        figs = [d.plot(), sel.plot(), stabilization_diagram(d), mode_shapes(sel), result.plot(),
+                result.select_modes().plot()]
+    assert plt.get_fignums() == before == []
+    # still ordinary figures: they save, and a given Axes is drawn into (pyplot's, if the caller wants a window)
+    figs[0].savefig(tmp_path / "d.png", dpi=40)
+    assert (tmp_path / "d.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    fig, ax = plt.subplots()
+    assert d.plot(ax=ax) is fig and plt.get_fignums() == [fig.number]
+
+
+def test_figures_display_in_jupyter_with_and_without_the_inline_backend(small_chain):
+    pytest.importorskip("IPython")
+    import base64
+
+    from IPython.core.formatters import DisplayFormatter
+
+    _, d, sel = small_chain
+    for fig in (d.plot(), sel.plot()):
+        # a kernel where pyplot was never imported: no figure formatter is registered
+        data, _ = DisplayFormatter().format(fig)
+        assert data["image/png"][:8] == b"\x89PNG\r\n\x1a\n"
+    # with the inline backend's formatter (what `%matplotlib inline` registers)
+    from IPython.core.interactiveshell import InteractiveShell
+    from IPython.core.pylabtools import select_figure_formats
+
+    shell = InteractiveShell.instance()
+    select_figure_formats(shell, {"png"})
+    png = shell.display_formatter.format(d.plot())[0]["image/png"]
+    png = base64.b64decode(png) if isinstance(png, str) else png   # base64 text in recent IPython
+    assert png[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_plot_switches_must_be_booleans(small_chain):
+    _, d, sel = small_chain
+    with pytest.raises(TypeError, match="show_rejected must be True or False; got 'no'"):
+        d.plot(show_rejected="no")
+    with pytest.raises(TypeError, match="ncols must be an integer"):
+        mode_shapes(sel, ncols=2.0)

@@ -312,7 +312,6 @@ def test_large_record_runs():
     [
         ({"n_samples": 0}, "n_samples"),
         ({"n_samples": -5}, "n_samples"),
-        ({"n_samples": 10.5}, "n_samples"),
         ({"fs": 0.0}, "fs"),
         ({"fs": -50.0}, "fs"),
         ({"fs": float("nan")}, "fs"),
@@ -335,6 +334,12 @@ def test_bad_arguments_raise_value_error(kwargs, name):
     n_samples = args.pop("n_samples")
     with pytest.raises(ValueError, match=name):
         simulate(n_samples, **args)
+
+
+def test_a_non_integer_count_is_a_type_error_as_in_identify():
+    # The same mistake raises the same exception in every entry point (identify: TypeError).
+    with pytest.raises(TypeError, match="n_samples"):
+        simulate(10.5, seed=0)
 
 
 def test_nyquist_warning():

@@ -20,6 +20,7 @@
 #include <cmath>
 #include <cstddef>
 #include <map>
+#include <sstream>
 #include <vector>
 
 #include "detail/checks.hpp"
@@ -472,13 +473,15 @@ inline Covariances compute_covariances(const Eigen::Ref<const Eigen::MatrixXd>& 
         detail::require(u.cols() == y.cols(), "u must have as many samples as y (", y.cols(),
                         "), got ", u.cols());
     const Index w = layout.window();
-    // n_blocks * w is formed only once it is known to be at most the record length.
-    detail::require(n_blocks <= y.cols() / w, "record too short: ", y.cols(), " samples cannot hold n_blocks = ",
-                    n_blocks, " blocks of at least p + q = ", w, " Hankel columns");
-    const Index min_samples = n_blocks * w + w - 1;
-    detail::require(y.cols() >= min_samples, "record too short: ", y.cols(), " samples; n_blocks = ",
-                    n_blocks, " blocks of at least p + q = ", w,
-                    " Hankel columns need at least ", min_samples, " samples");
+    // In double: n_blocks * w could overflow an Index (n_blocks is the caller's number).
+    const double min_samples = double(n_blocks) * double(w) + double(w - 1);
+    if (!(double(y.cols()) >= min_samples)) {
+        std::ostringstream need;
+        need.precision(17);
+        need << min_samples;
+        detail::fail("record too short: ", y.cols(), " samples; n_blocks = ", n_blocks, " blocks of at least p + q = ",
+                     w, " Hankel columns need at least ", need.str(), " samples");
+    }
     const Index n = y.cols(), n_cols = n - layout.max_lag(), block_length = n_cols / n_blocks;
     const Index n_spans = detail::covariance_spans(n);
     const auto start = [&](Index s) { return n * s / n_spans; };

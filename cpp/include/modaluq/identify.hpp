@@ -47,8 +47,8 @@ struct IdentifyOptions {
         for (Index n : orders) detail::require(n >= 1, "orders must be >= 1, got ", n);
         if (uncertainty) detail::require(n_blocks >= 2, "n_blocks must be >= 2, got ", n_blocks);
         detail::require(input_rcond >= 0.0 && input_rcond < 1.0, "input_rcond must be in [0, 1), got ", input_rcond);
-        detail::require(threads >= 1 && threads <= kMaxThreads, "threads must be in 1..", kMaxThreads, ", got ",
-                        threads);
+        detail::require(threads >= 1, "threads must be >= 1, got ", threads);
+        detail::require(threads <= kMaxThreads, "threads must be <= ", kMaxThreads, ", got ", threads);
     }
     static constexpr Index kMaxThreads = 1024;  ///< more is a mistake, not a machine
 

@@ -19,7 +19,6 @@ import contextlib
 import json
 import math
 import multiprocessing
-import numbers
 import os
 import platform
 import time
@@ -30,7 +29,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .._core import NumericalError
-from ..identification import ModalUQWarning, _integer, identify
+from ..identification import MAX_THREADS, ModalUQWarning, _boolean, _integer, _real, identify
 from ..simulate import simulate
 
 __all__ = ["METHODS", "METHOD_LABELS", "MonteCarloResult", "match_modes", "monte_carlo", "record_seed"]
@@ -129,12 +128,7 @@ def match_modes(frequency_hz, true_frequency_hz, tolerance: float = 0.05) -> np.
 
 
 def _fraction(name, value) -> float:
-    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
-        raise TypeError(f"{name} must be a real number; got {value!r}")
-    value = float(value)
-    if not (0.0 < value < 1.0):
-        raise ValueError(f"{name} must lie in (0, 1); got {value}")
-    return value
+    return _real(name, value, low=0.0, high=1.0, low_open=True, high_open=True)
 
 
 @contextlib.contextmanager
@@ -440,7 +434,7 @@ class MonteCarloResult:
         """Write the per-record table (or, with ``summary=True``, the per-mode summary) as CSV."""
         import csv
 
-        cols = self.summary_columns() if summary else self._columns()
+        cols = self.summary_columns() if _boolean("summary", summary) else self._columns()
         names = list(cols)
         with open(path, "w", newline="") as fh:
             w = csv.writer(fh)
@@ -597,9 +591,9 @@ def monte_carlo(n_records: int = 200, *, n_samples: int = 10_000, order: int = 1
         past_block_rows = _integer("past_block_rows", past_block_rows, minimum=1)
     n_blocks = _integer("n_blocks", n_blocks, minimum=2)
     seed = _integer("seed", seed, minimum=0)
-    processes = _available_cpus() if processes is None else _integer("processes", processes, minimum=1)
-    if not isinstance(progress, (bool, np.bool_)):
-        raise TypeError(f"progress must be True or False; got {progress!r}")
+    processes = _available_cpus() if processes is None else _integer("processes", processes, minimum=1,
+                                                                      maximum=MAX_THREADS)
+    progress = _boolean("progress", progress)
     match_tolerance = _fraction("match_tolerance", match_tolerance)
     n_bootstrap = _integer("n_bootstrap", n_bootstrap, minimum=0)
     if chunk_size is not None:
