@@ -5,7 +5,8 @@
 #      UndefinedBehaviorSanitizer, so a read out of bounds or an overflow fails the run;
 #   3. a C++ project built against the installed headers (cpp/examples);
 #   4. pytest (oracle cross-validation, Monte Carlo, loaders, CLI, ...);
-#   5. a short fuzz run over the file loaders (tests/fuzz; FUZZ_SECONDS, default 60).
+#   5. a short fuzz run over the file loaders (tests/fuzz; FUZZ_SECONDS per format, default 10;
+#      failing inputs are saved in build/fuzz-failures).
 # Idempotent. JOBS sets the build parallelism (default 2).
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -30,7 +31,5 @@ build/example/identify_stream
 echo "== Python: pytest"
 "$PY" -m pytest -q
 
-if [[ -f tests/fuzz/fuzz_loaders.py ]]; then
-  echo "== loaders: short fuzz run"
-  "$PY" tests/fuzz/fuzz_loaders.py --seconds "${FUZZ_SECONDS:-60}" --seed 1
-fi
+echo "== loaders: short fuzz run (the long run: docs/reliability.md)"
+"$PY" tests/fuzz/fuzz_loaders.py --seconds "${FUZZ_SECONDS:-10}" --seed "${FUZZ_SEED:-0}" --save-dir build/fuzz-failures

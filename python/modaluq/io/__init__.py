@@ -18,8 +18,14 @@ from ._common import RecordingFileError
 from .recording import Recording
 
 __all__ = ["Recording", "RecordingFileError", "load", "SUPPORTED_EXTENSIONS", "FORMATS",
+           "PARSE_TIMEOUT",
            "read_csv", "read_numpy", "read_npy", "read_npz", "read_matlab", "read_hdf5",
            "read_uff", "read_tdms", "from_sep005", "to_sep005"]
+
+#: Time limit (s) for one file parsed in an isolated child process (MATLAB, HDF5 readers with
+#: ``isolate=True``, the default), plus one second per 50 MB of file; past it the parser is
+#: killed and a RecordingFileError says so. See docs/reliability.md.
+PARSE_TIMEOUT = 60.0
 
 #: format name -> (module, reader function)
 FORMATS = {

@@ -6,6 +6,7 @@ import contextlib
 import importlib
 import math
 import os
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -13,7 +14,7 @@ import numpy as np
 from .recording import _check_fs
 
 __all__ = ["RecordingFileError", "check_path", "reading", "fs_from_time", "snap_fs",
-           "pick_fs", "optional_import", "check_str_or_none"]
+           "pick_fs", "optional_import", "check_str_or_none", "parse_isolated"]
 
 
 class RecordingFileError(ValueError):
@@ -67,6 +68,20 @@ def reading(path, what: str):
                          "format?)") from exc
 
 
+def parse_isolated(isolate, func, path, what: str, *args, **kwargs):
+    """``func(*args, **kwargs)``, in a child process when ``isolate`` (see ``_isolate``), with
+    the time limit ``modaluq.io.PARSE_TIMEOUT`` plus one second per 50 MB of file."""
+    if not isinstance(isolate, bool):
+        raise TypeError(f"isolate must be True or False, got {isolate!r}")
+    if not isolate:
+        return func(*args, **kwargs)
+    from . import _isolate
+
+    base = float(getattr(sys.modules[__package__], "PARSE_TIMEOUT", 60.0))
+    timeout = base + Path(path).stat().st_size / 50e6
+    return _isolate.run(func, path, what, *args, timeout=timeout, **kwargs)
+
+
 def snap_fs(fs: float, rtol: float) -> float:
     """Return the 'roundest' number (fewest significant digits) within ``rtol`` of ``fs``.
 
@@ -104,18 +119,22 @@ def fs_from_time(t, path, *, tolerance: float = 0.01, what: str = "time column")
     if not np.isfinite(t).all():
         k = int(np.argmin(np.isfinite(t)))
         raise fail(path, f"{what} has a non-finite value at sample {k}")
-    d = np.diff(t)
+    with np.errstate(over="ignore"):
+        d = np.diff(t)
     if (d <= 0).any():
         k = int(np.argmax(d <= 0))
         raise fail(path, f"{what} is not strictly increasing (t[{k + 1}]={t[k + 1]!r} <= "
                          f"t[{k}]={t[k]!r})")
     k = np.arange(n, dtype=np.float64)
-    km, tm = k.mean(), t.mean()
-    dt = float(np.dot(k - km, t - tm) / np.dot(k - km, k - km))
-    t0 = tm - dt * km
-    dev = np.abs(t - (t0 + dt * k))
-    worst = int(np.argmax(dev))
-    if dev[worst] > tolerance * dt:
+    with np.errstate(over="ignore", invalid="ignore"):
+        t = t - t[0]  # absolute times near the float limit would overflow the fit
+        km, tm = k.mean(), t.mean()
+        dt = float(np.dot(k - km, t - tm) / np.dot(k - km, k - km))
+        dev = np.abs(t - (tm - dt * km + dt * k))
+    if not (math.isfinite(dt) and dt > 0 and 0 < 1.0 / dt < math.inf):
+        raise fail(path, f"{what} gives no usable sample period (dt={dt!r} s); pass fs=")
+    worst = int(np.argmax(np.where(np.isnan(dev), np.inf, dev)))
+    if not dev[worst] <= tolerance * dt:
         raise fail(path, f"{what} is not uniformly sampled: sample {worst} deviates by "
                          f"{dev[worst] / dt:.3g} sample periods from a uniform grid with "
                          f"dt={dt:.6g} s (tolerance {tolerance:g}); resample the data or pass "

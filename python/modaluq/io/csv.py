@@ -13,13 +13,21 @@ from .recording import Recording
 
 __all__ = ["read_csv", "TIME_COLUMN_NAMES"]
 
-#: Header names (case-insensitive, unit suffix removed) recognised as the time column.
-TIME_COLUMN_NAMES = ("time", "t", "time_s", "time_sec", "times", "time_ms", "t_s", "t_ms",
-                     "seconds", "timestamp_s")
+#: Header names (case-insensitive, unit removed) recognised as the time column.
+TIME_COLUMN_NAMES = ("time", "t", "times", "timestamp", "seconds", "s")
+#: Units of a time column (``time [min]``, ``t (ms)``, ``time/ns``, ``Time_msec``) in seconds.
+TIME_UNITS = {
+    **dict.fromkeys(("s", "sec", "secs", "second", "seconds"), 1.0),
+    **dict.fromkeys(("ms", "msec", "msecs", "millisecond", "milliseconds"), 1e-3),
+    **dict.fromkeys(("us", "µs", "μs", "usec", "microsecond", "microseconds"), 1e-6),
+    **dict.fromkeys(("ns", "nsec", "nanosecond", "nanoseconds"), 1e-9),
+    **dict.fromkeys(("min", "mins", "minute", "minutes"), 60.0),
+    **dict.fromkeys(("h", "hr", "hrs", "hour", "hours"), 3600.0),
+    **dict.fromkeys(("d", "day", "days"), 86400.0),
+}
 
 _CANDIDATES = ("\t", ";", ",", "|")
 _UNIT_RE = re.compile(r"^(.*?)\s*(?:\[([^\]]*)\]|\(([^)]*)\))\s*$")
-_TIME_SCALE = {"s": 1.0, "sec": 1.0, "seconds": 1.0, "ms": 1e-3, "us": 1e-6, "µs": 1e-6}
 _DELIM_NAMES = {"\t": "tab", ";": "semicolon", ",": "comma", "|": "pipe", None: "whitespace"}
 
 
@@ -65,6 +73,36 @@ def _name_unit(field: str) -> tuple[str, str]:
         unit = m.group(2) if m.group(2) is not None else m.group(3)
         return m.group(1).strip(), unit.strip()
     return field.strip(), ""
+
+
+def _time_unit(name: str, unit: str):
+    """``(is_time, unit)`` for a header cell split into name and bracketed unit: whether it
+    names a time column and the unit it states ('' if none). ``time/ns`` and ``Time_msec``
+    carry the unit in the name; a unit-like name alone (``seconds``, ``s``) is seconds."""
+    n = name.strip().lower()
+    if n in TIME_COLUMN_NAMES:
+        return True, unit.strip() or ("s" if n in TIME_UNITS else "")
+    if not unit:
+        base, sep, u = n.rpartition("/")
+        if sep and base.strip() in TIME_COLUMN_NAMES:  # "time/ns": any unit, checked later
+            return True, u.strip()
+        base, sep, u = n.rpartition("_")
+        if sep and base in TIME_COLUMN_NAMES and u in TIME_UNITS:  # "time_x" is not time
+            return True, u
+    return False, ""
+
+
+def _time_scale(path, column: str, unit: str) -> float:
+    """Seconds per time-column unit (none stated: seconds); ValueError for an unknown one."""
+    if not unit:
+        return 1.0
+    scale = TIME_UNITS.get(unit.lower())
+    if scale is None:
+        raise fail(path, f"time column {column!r}: unknown time unit {unit!r}; understood: "
+                         "s, ms, us, ns, min, h, d (and spellings like sec, msec, minutes, "
+                         "hours); pass fs= to ignore it, or time_column=False if the column is "
+                         "not time")
+    return scale
 
 
 def _cell_error(path, lineno: int, colname: str, cell: str) -> Exception:
@@ -116,8 +154,10 @@ def read_csv(path, *, fs=None, inputs=None, time_column=None, delimiter=None, de
         Known-input channels, by header name or by index among the data columns (the time
         column excluded).
     time_column : str, int, False or None
-        None: auto-detect a column named like ``time``, ``t``, ``time_s`` (case-insensitive,
-        unit suffix such as ``[s]`` ignored). A name or a 0-based index among all columns picks it
+            None: auto-detect a column named ``time``, ``t``, ``times``, ``timestamp``, ``seconds``
+        or ``s`` (case-insensitive), with an optional unit: ``time [min]``, ``t (ms)``,
+        ``time/ns``, ``Time_msec`` (see TIME_UNITS; none means seconds, an unknown one is a
+        ValueError unless ``fs`` is given). A name or a 0-based index among all columns picks it
         explicitly; False means there is no time column.
     delimiter : str, optional
         Field separator; default sniffed among tab, ``;``, ``,``, ``|`` and whitespace.
@@ -168,11 +208,10 @@ def read_csv(path, *, fs=None, inputs=None, time_column=None, delimiter=None, de
         except UnicodeDecodeError:
             text = raw.decode("latin-1")
 
-    all_lines = text.split("\n")
+    all_lines = re.split(r"\r\n|\r|\n", text)  # a bare CR ends a line too (classic Mac)
     hdr_idx = None
     data, linenos = [], []
     for i, line in enumerate(all_lines):
-        line = line.rstrip("\r")
         s = line.strip()
         if not s or (comment is not None and s.startswith(comment)):
             continue
@@ -186,13 +225,16 @@ def read_csv(path, *, fs=None, inputs=None, time_column=None, delimiter=None, de
     if not data:
         raise fail(p, f"no data rows after the header (line {hdr_idx + 1})")
 
-    if delimiter is None:
-        delim = _sniff(header, data[:20], decimal)
-    elif delimiter.isspace() and delimiter != "\t":
-        delim = None  # any run of spaces
-    else:
-        delim = delimiter
-    fields = _split_header(header, delim)
+    try:
+        if delimiter is None:
+            delim = _sniff(header, data[:20], decimal)
+        elif delimiter.isspace() and delimiter != "\t":
+            delim = None  # any run of spaces
+        else:
+            delim = delimiter
+        fields = _split_header(header, delim)
+    except _csv.Error as exc:  # e.g. a header cell over the csv module's 128 KiB limit
+        raise fail(p, f"line {hdr_idx + 1}: cannot split the header row: {exc}") from None
     # tolerate a trailing delimiter on every line ("a,b,c," / "1,2,3,")
     if len(fields) > 1 and fields[-1] == "" and delim is not None:
         fields = fields[:-1]
@@ -239,8 +281,8 @@ def read_csv(path, *, fs=None, inputs=None, time_column=None, delimiter=None, de
     # ------------------------------------------------------------ time column
     tcol = None
     if time_column is None:
-        for k, nm in enumerate(names):
-            if nm.lower() in TIME_COLUMN_NAMES:
+        for k, (nm, un) in enumerate(zip(names, units)):
+            if _time_unit(nm, un)[0]:
                 tcol = k
                 break
     elif time_column is not False:
@@ -262,9 +304,8 @@ def read_csv(path, *, fs=None, inputs=None, time_column=None, delimiter=None, de
     fs_file = None
     if tcol is not None:
         if fs is None:
-            unit = units[tcol].lower()
-            nm = names[tcol].lower()
-            scale = _TIME_SCALE.get(unit, 1e-3 if nm.endswith("_ms") else 1.0)
+            is_time, unit = _time_unit(names[tcol], units[tcol])
+            scale = _time_scale(p, fields[tcol], unit if is_time else units[tcol])
             fs_file = fs_from_time(values[:, tcol] * scale, p, tolerance=float(time_tolerance),
                                    what=f"time column {names[tcol]!r}")
         keep = [k for k in range(ncol) if k != tcol]

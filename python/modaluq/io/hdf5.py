@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from ._common import (check_fs_arg, check_path, fail, fs_from_increment, fs_from_time,
-                      optional_import, pick_fs, reading, str_list)
+                      optional_import, parse_isolated, pick_fs, reading, str_list)
 from .recording import Recording
 
 __all__ = ["read_hdf5", "FS_ATTRIBUTE_NAMES"]
@@ -55,44 +55,10 @@ def _strs(obj, keys, n):
     return None
 
 
-def read_hdf5(path, *, fs=None, inputs=None, dataset=None, names=None, units=None,
-              transpose=None, time_tolerance=0.01) -> Recording:
-    """Read channels from an HDF5 file.
-
-    Parameters
-    ----------
-    dataset : str or list of str, optional
-        Path(s) of the dataset(s) to read, e.g. ``'/acc'`` or ``['/ch/a1', '/ch/a2']``.
-        A 2-D dataset gives one channel per column, a 1-D dataset one channel; several datasets
-        are concatenated column-wise and must have the same length. Default: the only numeric
-        2-D dataset in the file (else the only numeric 1-D one that is not named like a time
-        vector); otherwise a ValueError lists the candidates.
-    fs : float, optional
-        Overrides the file. Otherwise an attribute ``fs``/``sampling_rate`` (also ``Fs``,
-        ``sample_rate``, or the increment ``dt``/``wf_increment``) on the dataset, else on its
-        parent groups up to the file; else a sibling dataset ``t``/``time`` of matching length.
-    transpose : bool or None
-        None: samples run along the longer dimension of a 2-D dataset. True/False force it.
-    names, units : sequence of str, optional
-        Default from dataset attributes ``channel_names``/``names`` and ``units``; for several 1-D
-        datasets the dataset's ``name`` attribute or its basename.
-    """
-    p = check_path(path)
-    check_fs_arg(fs)
-    if dataset is not None:
-        if isinstance(dataset, str):
-            paths = [dataset]
-        elif isinstance(dataset, (list, tuple)) and dataset and \
-                all(isinstance(d, str) for d in dataset):
-            paths = list(dataset)
-        else:
-            raise TypeError(f"dataset must be a str or a non-empty list of str, got {dataset!r}")
-    else:
-        paths = None
-    if transpose is not None and not isinstance(transpose, bool):
-        raise TypeError(f"transpose must be True, False or None, got {transpose!r}")
+def _read_arrays(p, paths, transpose, time_tolerance, want_fs):
+    """Everything that touches h5py (run in a child process when isolated): the blocks of
+    samples, their default names and units, and fs found in the file (None if not wanted)."""
     h5py = optional_import("h5py", "h5py", "HDF5")
-
     with reading(p, "HDF5 file"):
         with h5py.File(str(p), "r") as f:
             if paths is None:
@@ -149,7 +115,7 @@ def read_hdf5(path, *, fs=None, inputs=None, dataset=None, names=None, units=Non
                         [f"ch{j}" for j in range(nch)])
                 auto_names.extend(nm)
                 auto_units.extend(_strs(ds, _UNIT_ATTRS, nch) or [""] * nch)
-                if fs is None:
+                if want_fs:
                     fs_found.append(_find_fs(ds, p))
             lens = {b.shape[0] for b in blocks}
             if len(lens) != 1:
@@ -157,7 +123,7 @@ def read_hdf5(path, *, fs=None, inputs=None, dataset=None, names=None, units=Non
                            ", ".join(f"{d}: {b.shape[0]}" for d, b in zip(paths, blocks)))
             n = blocks[0].shape[0]
             fs_file = None
-            if fs is None:
+            if want_fs:
                 vals = [(v, w) for v, w in fs_found if v is not None]
                 if vals:
                     fs_file = vals[0][0]
@@ -174,6 +140,52 @@ def read_hdf5(path, *, fs=None, inputs=None, dataset=None, names=None, units=Non
                             fs_file = fs_from_time(o[()], p, tolerance=time_tolerance,
                                                    what=f"time dataset {o.name!r}")
                             break
+    return blocks, auto_names, auto_units, fs_file
+
+
+def read_hdf5(path, *, fs=None, inputs=None, dataset=None, names=None, units=None,
+              transpose=None, time_tolerance=0.01, isolate=True) -> Recording:
+    """Read channels from an HDF5 file.
+
+    Parameters
+    ----------
+    dataset : str or list of str, optional
+        Path(s) of the dataset(s) to read, e.g. ``'/acc'`` or ``['/ch/a1', '/ch/a2']``.
+        A 2-D dataset gives one channel per column, a 1-D dataset one channel; several datasets
+        are concatenated column-wise and must have the same length. Default: the only numeric
+        2-D dataset in the file (else the only numeric 1-D one that is not named like a time
+        vector); otherwise a ValueError lists the candidates.
+    fs : float, optional
+        Overrides the file. Otherwise an attribute ``fs``/``sampling_rate`` (also ``Fs``,
+        ``sample_rate``, or the increment ``dt``/``wf_increment``) on the dataset, else on its
+        parent groups up to the file; else a sibling dataset ``t``/``time`` of matching length.
+    transpose : bool or None
+        None: samples run along the longer dimension of a 2-D dataset. True/False force it.
+    names, units : sequence of str, optional
+        Default from dataset attributes ``channel_names``/``names`` and ``units``; for several 1-D
+        datasets the dataset's ``name`` attribute or its basename.
+    isolate : bool
+        Parse in a child process (default), so that a crash or a hang of HDF5 on a corrupt file
+        becomes a ValueError naming the file (time limit ``modaluq.io.PARSE_TIMEOUT``); False
+        parses in this process (saves a few ms per file).
+    """
+    p = check_path(path)
+    check_fs_arg(fs)
+    if dataset is not None:
+        if isinstance(dataset, str):
+            paths = [dataset]
+        elif isinstance(dataset, (list, tuple)) and dataset and \
+                all(isinstance(d, str) for d in dataset):
+            paths = list(dataset)
+        else:
+            raise TypeError(f"dataset must be a str or a non-empty list of str, got {dataset!r}")
+    else:
+        paths = None
+    if transpose is not None and not isinstance(transpose, bool):
+        raise TypeError(f"transpose must be True, False or None, got {transpose!r}")
+    optional_import("h5py", "h5py", "HDF5")
+    blocks, auto_names, auto_units, fs_file = parse_isolated(
+        isolate, _read_arrays, p, "HDF5", p, paths, transpose, time_tolerance, fs is None)
     fs_v = pick_fs(fs, fs_file, p, "no fs/sampling_rate attribute on the dataset or file")
     samples = np.hstack(blocks) if len(blocks) > 1 else blocks[0]
     return Recording.from_arrays(samples, fs_v, names=names if names is not None else auto_names,

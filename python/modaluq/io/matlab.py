@@ -2,12 +2,16 @@
 
 from __future__ import annotations
 
+import math
+import mmap
 import numbers
+import struct
+import zlib
 
 import numpy as np
 
-from ._common import (check_fs_arg, check_path, fail, fs_from_time, optional_import, pick_fs,
-                      reading, str_list)
+from ._common import (check_fs_arg, check_path, fail, fs_from_time, optional_import,
+                      parse_isolated, pick_fs, reading, str_list)
 from .recording import Recording
 
 __all__ = ["read_matlab", "FS_VARIABLE_NAMES"]
@@ -35,6 +39,125 @@ def _is_hdf5(p) -> bool:
 
 
 # ---------------------------------------------------------------------------- v5 (scipy)
+#: MAT v5 data types (miINT8 ... miUTF32); 8, 10 and 11 are reserved.
+_MI_TYPES = frozenset((1, 2, 3, 4, 5, 6, 7, 9, 12, 13, 14, 15, 16, 17, 18))
+_MI_MATRIX, _MI_COMPRESSED = 14, 15
+#: MATLAB array classes (mxCELL_CLASS ...); sparse (5) and opaque classes are not size-checked.
+_MX_CELL, _MX_STRUCT, _MX_OBJECT, _MX_CHAR, _MX_DOUBLE, _MX_UINT64 = 1, 2, 3, 4, 6, 15
+
+
+def _check_v5_elements(p, buf, start, end, endian, depth=0) -> list:
+    """Walk the data-element tags of ``buf[start:end]`` (recursing into miMATRIX): every type
+    must exist and every size fit its container. SciPy indexes a C table with the type read from
+    the file, so an unknown type (one flipped byte) segfaults it. Returns the elements as
+    ``(type, size, body offset)``."""
+    if depth > 64:
+        raise fail(p, "MATLAB file nests arrays more than 64 deep (corrupt?)")
+    pos, out = start, []
+    while pos < end:
+        if end - pos < 8:
+            raise fail(p, f"MATLAB data element at byte {pos} is cut short (truncated file?)")
+        word, size = struct.unpack_from(endian + "II", buf, pos)
+        if word >> 16:  # small data element: type and size packed into the first word
+            mtype, size, body, nxt = word & 0xFFFF, word >> 16, pos + 4, pos + 8
+            if size > 4:
+                raise fail(p, f"MATLAB data element at byte {pos} is corrupt (small element of "
+                              f"{size} bytes)")
+        else:
+            mtype, body = word, pos + 8
+            nxt = body + size + (-size % 8)
+        if mtype not in _MI_TYPES:
+            raise fail(p, f"MATLAB data element at byte {pos} has unknown type {mtype} "
+                          "(corrupt file)")
+        if body + size > end:
+            raise fail(p, f"MATLAB data element at byte {pos} declares {size} bytes but its "
+                          f"container ends at byte {end} (truncated or corrupt file)")
+        if mtype == _MI_MATRIX:
+            _check_v5_matrix(p, buf, pos, _check_v5_elements(p, buf, body, body + size, endian,
+                                                              depth + 1), endian)
+        out.append((mtype, size, body))
+        pos = min(nxt, end)
+    return out
+
+
+def _check_v5_matrix(p, buf, pos, kids, endian) -> None:
+    """The element count given by an array's dimensions must match its content: SciPy allocates
+    and loops over prod(dims) before it reads, so one corrupt dimension (1e9 instead of 1) costs
+    minutes and gigabytes before the error."""
+    if len(kids) < 2:
+        return  # an empty miMATRIX is an empty array
+    (_, fsize, fbody), (_, dsize, dbody) = kids[0], kids[1]
+    if fsize < 4 or dsize < 4:
+        raise fail(p, f"MATLAB array at byte {pos} has no class or dimensions (corrupt file)")
+    flags = struct.unpack_from(endian + "I", buf, fbody)[0]
+    cls, is_complex = flags & 0xFF, bool(flags & 0x800)
+    dims = struct.unpack_from(f"{endian}{dsize // 4}i", buf, dbody)
+    if min(dims) < 0:
+        raise fail(p, f"MATLAB array at byte {pos} has negative dimensions {dims} (corrupt file)")
+    n = math.prod(dims)
+    if cls in (_MX_CELL, _MX_STRUCT, _MX_OBJECT):
+        head = {_MX_CELL: 3, _MX_STRUCT: 5, _MX_OBJECT: 6}[cls]
+        nf = 1
+        if cls != _MX_CELL and len(kids) >= head:
+            fnl, names = kids[head - 2], kids[head - 1]
+            fnl = struct.unpack_from(endian + "i", buf, fnl[2])[0] if fnl[1] >= 4 else 0
+            nf = names[1] // fnl if fnl > 0 else 0
+        if len(kids) < head or len(kids) - head != n * nf:
+            raise fail(p, f"MATLAB array at byte {pos}: its dimensions {dims} call for {n * nf} "
+                          f"elements but it holds {max(len(kids) - head, 0)} (corrupt file)")
+    elif cls == _MX_CHAR or _MX_DOUBLE <= cls <= _MX_UINT64:
+        # every element takes at least one byte; a complex array (flag 0x800) has an imaginary
+        # part too, which SciPy reads without checking that it is there
+        parts = (3, 4) if is_complex and cls != _MX_CHAR else (3,)
+        for k in parts:
+            if n and (len(kids) <= k or kids[k][1] < n):
+                raise fail(p, f"MATLAB array at byte {pos}: its dimensions {dims} call for {n} "
+                              f"{'imaginary' if k == 4 else ''} elements but its data holds "
+                              f"{kids[k][1] if len(kids) > k else 0} bytes (corrupt file)")
+
+
+def _validate_v5(p) -> None:
+    """Check the framing of a MAT v5/v7 file before SciPy parses it (v4 files are left alone)."""
+    with open(p, "rb") as fh, mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ) as mm:
+        buf = memoryview(mm)  # no copy of a large file
+        try:
+            _validate_v5_buffer(p, buf)
+        finally:
+            buf.release()
+
+
+def _validate_v5_buffer(p, buf) -> None:
+    if len(buf) < 4 or 0 in bytes(buf[:4]):
+        return  # MAT v4 (no text header): SciPy reads it with numpy only
+    if len(buf) < 128:
+        raise fail(p, f"MATLAB v5 header is cut short ({len(buf)} of 128 bytes)")
+    endian = {b"IM": "<", b"MI": ">"}.get(bytes(buf[126:128]))
+    if endian is None:
+        raise fail(p, "not a MATLAB v5 file (bad endian indicator at byte 126)")
+    pos = 128
+    while pos < len(buf):
+        if len(buf) - pos < 8:
+            raise fail(p, f"MATLAB variable at byte {pos} is cut short (truncated file?)")
+        mtype, size = struct.unpack_from(endian + "II", buf, pos)
+        if pos + 8 + size > len(buf):
+            raise fail(p, f"MATLAB variable at byte {pos} declares {size} bytes but only "
+                          f"{len(buf) - pos - 8} remain (truncated file?)")
+        if mtype == _MI_COMPRESSED:  # decompress only as much as the inner element declares
+            z = zlib.decompressobj()
+            try:
+                head = z.decompress(buf[pos + 8:pos + 8 + size], 8)
+                if len(head) == 8:
+                    inner = struct.unpack_from(endian + "II", head)[1]
+                    inner_buf = head + z.decompress(z.unconsumed_tail, inner)
+                    _check_v5_elements(p, inner_buf, 0, len(inner_buf), endian)
+            except zlib.error as exc:
+                raise fail(p, f"MATLAB variable at byte {pos}: corrupt compressed data "
+                              f"({exc})") from None
+        else:
+            _check_v5_elements(p, buf, pos, pos + 8 + size, endian)
+        pos += 8 + size
+
+
 def _load_v5(p) -> dict:
     sio = optional_import("scipy.io", "scipy", "MATLAB .mat")
     with reading(p, "MATLAB .mat file"):
@@ -159,7 +282,7 @@ def _describe(v) -> str:
 
 
 def read_matlab(path, *, fs=None, inputs=None, variable=None, names=None, units=None,
-                transpose=None, time_tolerance=0.01) -> Recording:
+                transpose=None, time_tolerance=0.01, isolate=True) -> Recording:
     """Read channels from a MATLAB ``.mat`` file (v4/v5/v7 or v7.3).
 
     Parameters
@@ -178,6 +301,10 @@ def read_matlab(path, *, fs=None, inputs=None, variable=None, names=None, units=
     names, units : sequence of str, optional
         Channel names/units; default from a variable ``channel_names``/``names`` and ``units``
         (cell array of strings or char matrix) when their length matches, else ``ch0, ch1, ...``.
+    isolate : bool
+        Parse in a child process (default), so that a crash or a hang of SciPy or HDF5 on a
+        corrupt file becomes a ValueError naming the file (time limit
+        ``modaluq.io.PARSE_TIMEOUT``); False parses in this process (saves a few ms per file).
     """
     p = check_path(path)
     check_fs_arg(fs)
@@ -194,7 +321,11 @@ def read_matlab(path, *, fs=None, inputs=None, variable=None, names=None, units=
     if transpose is not None and not isinstance(transpose, bool):
         raise TypeError(f"transpose must be True, False or None, got {transpose!r}")
 
-    tree = _load_v73(p) if _is_hdf5(p) else _load_v5(p)
+    if _is_hdf5(p):
+        tree = parse_isolated(isolate, _load_v73, p, "MATLAB v7.3 (HDF5)", p)
+    else:
+        _validate_v5(p)
+        tree = parse_isolated(isolate, _load_v5, p, "MATLAB", p)
     if not tree:
         raise fail(p, "the .mat file holds no variables")
 

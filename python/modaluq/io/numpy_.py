@@ -17,13 +17,16 @@ def _load_array(obj, key, path):
     """One array out of an NpzFile (``key``) or a .npy file (``obj`` = path, ``key`` None),
     refusing pickles with a clear message."""
     try:
-        return obj[key] if key is not None else np.load(obj, allow_pickle=False)
+        arr = obj[key] if key is not None else np.load(obj, allow_pickle=False)
     except ValueError as exc:
         if "pickle" in str(exc).lower():
             what = f"array {key!r}" if key is not None else "the array"
             raise fail(path, f"{what} holds Python objects (pickled object array); refusing to "
                              "load it with allow_pickle=False") from exc
         raise
+    if not isinstance(arr, np.ndarray):  # NpzFile returns a member without the .npy magic raw
+        raise fail(path, f"member {key!r} of the archive is not .npy data")
+    return arr
 
 
 def read_npy(path, *, fs=None, inputs=None, names=None, units=None) -> Recording:

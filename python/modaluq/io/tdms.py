@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import logging
+import struct
 
 import numpy as np
 
@@ -25,6 +26,41 @@ class _Collect(logging.Handler):
         self.messages.append(record.getMessage())
 
 
+_LEAD_IN = 28
+_TOC_BIG_ENDIAN = 1 << 6
+_UNFINISHED = 0xFFFFFFFFFFFFFFFF
+
+
+def _segment_problem(p) -> str | None:
+    """Walk the chain of segment lead-ins; describe the first incomplete or corrupt one.
+
+    npTDMS treats a lead-in cut short as the end of the file and only logs a cut inside the
+    metadata, so a truncated file would silently lose its last segments."""
+    size = p.stat().st_size
+    pos = k = 0
+    with open(p, "rb") as fh:
+        while pos < size:
+            fh.seek(pos)
+            lead = fh.read(_LEAD_IN)
+            where = f"segment {k} (byte {pos})"
+            if len(lead) < _LEAD_IN:
+                return f"{where} is cut short inside its lead-in ({len(lead)} of 28 bytes)"
+            if lead[:4] != b"TDSm":
+                return f"{where} does not start with 'TDSm' (corrupt)"
+            endian = ">" if struct.unpack("<l", lead[4:8])[0] & _TOC_BIG_ENDIAN else "<"
+            _, next_off, raw_off = struct.unpack(endian + "lQQ", lead[8:28])
+            if next_off == _UNFINISHED:
+                return f"{where} was never finished by the writer (length -1)"
+            if raw_off > next_off:
+                return f"{where} has its data offset past its end (corrupt)"
+            if pos + _LEAD_IN + next_off > size:
+                return (f"{where} declares {next_off} bytes but the file ends "
+                        f"{size - pos - _LEAD_IN} bytes into it")
+            pos += _LEAD_IN + next_off
+            k += 1
+    return None
+
+
 def read_tdms(path, *, fs=None, inputs=None, group=None, channels=None, time_tolerance=0.01
               ) -> Recording:
     """Read the channels of one group of a TDMS file.
@@ -42,8 +78,9 @@ def read_tdms(path, *, fs=None, inputs=None, group=None, channels=None, time_tol
     inputs : list of str/int, optional
         Known inputs by channel name or index (among the channels read).
 
-    Units come from the ``unit_string`` channel property. A truncated file (npTDMS reports
-    "less data than expected") and channels of different lengths raise ValueError.
+    Units come from the ``unit_string`` channel property. A truncated or unfinished file (any
+    segment cut short, which npTDMS would skip silently) and channels of different lengths
+    raise ValueError; the message says how many samples the complete part holds.
     """
     p = check_path(path)
     check_fs_arg(fs)
@@ -58,11 +95,12 @@ def read_tdms(path, *, fs=None, inputs=None, group=None, channels=None, time_tol
     with open(p, "rb") as fh:
         if fh.read(4) != b"TDSm":
             raise fail(p, "not a TDMS file (does not start with 'TDSm')")
+    problem = _segment_problem(p)
     handler = _Collect()
     log = logging.getLogger("nptdms")
     log.addHandler(handler)
     try:
-        with reading(p, "TDMS file"):
+        with reading(p, "TDMS file" + (f" ({problem})" if problem else "")):
             tf = nptdms.TdmsFile.read(str(p))
             groups = tf.groups()
             if not groups:
@@ -101,7 +139,12 @@ def read_tdms(path, *, fs=None, inputs=None, group=None, channels=None, time_tol
                     incs.append((c.name, c.properties["wf_increment"]))
     finally:
         log.removeHandler(handler)
-    trunc = [m for m in handler.messages if "less data than expected" in m
+    if problem:
+        counts = sorted({len(a) for a in arrays.values()})
+        readable = " or ".join(map(str, counts)) if counts else "no"
+        raise fail(p, f"truncated or incomplete TDMS file: {problem}; the complete part holds "
+                      f"{readable} samples per channel of group {g.name!r}; nothing was loaded")
+    trunc = [m for m in handler.messages if "less data than expected" in m or "incomplete" in m
              or "not a multiple of the chunk size" in m or "truncat" in m.lower()]
     if trunc:
         raise fail(p, f"file is truncated or incomplete (npTDMS: {trunc[0]})")

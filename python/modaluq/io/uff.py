@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import mmap
 import re
 
 import numpy as np
@@ -24,6 +25,8 @@ _FUNC = {0: "general or unknown", 1: "time response", 2: "auto spectrum", 3: "cr
          24: "shock response spectrum", 25: "finite impulse response filter",
          26: "multiple coherence", 27: "order function"}
 _TAG = re.compile(rb"    -1")
+_BLANKS = re.compile(rb" *")
+_NON_BLANK = re.compile(rb"\S")
 #: The increment is stored as E13.5 text (6 significant digits): fs is snapped within this.
 _INC_RTOL = 5.1e-6
 
@@ -43,22 +46,26 @@ def _node_name(rec) -> str:
 def _check_complete(p) -> None:
     """Every dataset is framed by two ``    -1`` lines; a dangling opening tag or anything but
     blanks after the last closing tag means the file was cut (pyuff silently drops it)."""
-    raw = p.read_bytes()
-    n = len(raw)
-    tags = []
-    for m in _TAG.finditer(raw):
-        i = m.start()
-        end = i + 6
-        # same rule as pyuff: the tag ends the line, or is padded with blanks to column 80
-        if end == n or raw[end] in (10, 13) or (i + 80 <= n and raw[end:i + 80] == b" " * 74):
-            tags.append(i)
-    if not tags:
-        raise fail(p, "no UFF dataset delimiters ('    -1' lines) found: not a UFF file")
-    if len(tags) % 2:
-        raise fail(p, f"incomplete dataset at byte {tags[-1]} (odd number of '-1' delimiters): "
-                      "truncated file?")
-    if raw[tags[-1] + 6:].strip():
-        raise fail(p, "unexpected content after the last dataset (truncated or corrupt file?)")
+    with open(p, "rb") as fh, mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ) as raw:
+        n = len(raw)  # scanned in place: no copy of the file (it may be large)
+        tags = 0
+        last = -1
+        for m in _TAG.finditer(raw):
+            i = m.start()
+            end = i + 6
+            # same rule as pyuff: the tag ends the line, or is padded with blanks to column 80
+            if end == n or raw[end] in (10, 13) or (
+                    i + 80 <= n and _BLANKS.fullmatch(raw, end, i + 80)):
+                tags += 1
+                last = i
+        if not tags:
+            raise fail(p, "no UFF dataset delimiters ('    -1' lines) found: not a UFF file")
+        if tags % 2:
+            raise fail(p, f"incomplete dataset at byte {last} (odd number of '-1' delimiters): "
+                          "truncated file?")
+        if _NON_BLANK.search(raw, last + 6):
+            raise fail(p, "unexpected content after the last dataset (truncated or corrupt "
+                          "file?)")
 
 
 def read_uff(path, *, fs=None, inputs=None, names=None, units=None, records=None,
@@ -92,8 +99,8 @@ def read_uff(path, *, fs=None, inputs=None, names=None, units=None, records=None
         raise TypeError(f"records must be a list of int, got {records!r}")
     pyuff = optional_import("pyuff", "pyuff", "UFF")
 
-    _check_complete(p)
     with reading(p, "UFF file"):
+        _check_complete(p)
         uf = pyuff.UFF(str(p))
         types = list(np.asarray(uf.get_set_types()).ravel())
         idx58 = [i for i, t in enumerate(types) if int(t) == 58]
