@@ -60,6 +60,18 @@ def test_degenerate_records_are_a_value_error_saying_why(kind):
         modaluq.identify(y, orders=[2, 4], **KW)
 
 
+def test_a_step_is_identified_up_to_its_rank_and_flagged_above():
+    # A step has H of numerical rank 2 (a near-DC pole at order 2); every higher order used to
+    # fail the whole run with NumericalError, and is now a flagged order without modes.
+    y = np.zeros((6000, 3))
+    y[3000:] = 1.0
+    with pytest.warns(modaluq.ModalUQWarning, match="use orders <= 2"):
+        r = modaluq.identify(y, orders=[2, 4, 6], **KW)
+    assert r.numerical_rank == 2
+    assert [m.degenerate for m in r.modes] == [False, True, True]
+    assert np.all(r.at_order(2).frequency_hz < 1.0 / (6000 / 50.0))  # below the record's resolution
+
+
 def test_orders_above_the_numerical_rank_are_flagged_not_fatal():
     t = np.arange(6000) / 50.0
     rng = np.random.default_rng(0)
