@@ -7,7 +7,7 @@
 
 #include <modaluq/covariance.hpp>
 
-#include <mutex>
+#include <atomic>
 #include <stdexcept>
 
 #include "bindings.hpp"
@@ -23,16 +23,21 @@ namespace {
 // one stream interleave its samples in an order nobody chose.
 struct GuardedAccumulator {
     modaluq::CovarianceAccumulator acc;
-    std::mutex busy;
+    std::atomic<bool> busy{false};
 
+    /// Marks the accumulator in use for one call (compare_exchange cannot fail spuriously).
     struct Use {
-        std::unique_lock<std::mutex> lock;
-        explicit Use(GuardedAccumulator& g) : lock(g.busy, std::try_to_lock) {
-            if (!lock.owns_lock())
+        GuardedAccumulator& g;
+        explicit Use(GuardedAccumulator& guarded) : g(guarded) {
+            bool expected = false;
+            if (!g.busy.compare_exchange_strong(expected, true))
                 throw std::runtime_error(
                     "CovarianceAccumulator is in use by another thread: push, merge and finish must not overlap "
                     "(use one accumulator per thread and merge them in order, or guard it with a lock)");
         }
+        ~Use() { g.busy.store(false); }
+        Use(const Use&) = delete;
+        Use& operator=(const Use&) = delete;
     };
 };
 }  // namespace
@@ -67,14 +72,21 @@ void modaluq::python::bind_covariance(py::module_& m) {
     using G = GuardedAccumulator;
     py::class_<G>(m, "CovarianceAccumulator")
         .def(py::init([](HankelLayout layout, Index block_length, bool demean, Index first_sample) {
-                 return new G{CovarianceAccumulator(std::move(layout), block_length, demean, first_sample), {}};
+                 return new G{CovarianceAccumulator(std::move(layout), block_length, demean, first_sample)};
              }),
              py::arg("layout"), py::arg("block_length"), py::arg("demean") = true, py::arg("first_sample") = 0)
         .def_property_readonly("layout", [](const G& g) { return g.acc.layout(); })
         .def_property_readonly("block_length", [](const G& g) { return g.acc.block_length(); })
         .def_property_readonly("first_sample", [](const G& g) { return g.acc.first_sample(); })
-        .def_property_readonly("end_sample", [](const G& g) { return g.acc.end_sample(); })
-        .def_property_readonly("n_samples", [](const G& g) { return g.acc.n_samples(); })
+        // end_sample and n_samples change while a push runs (GIL released): read under the guard.
+        .def_property_readonly("end_sample", [](G& g) {
+            G::Use use(g);
+            return g.acc.end_sample();
+        })
+        .def_property_readonly("n_samples", [](G& g) {
+            G::Use use(g);
+            return g.acc.n_samples();
+        })
         .def_property_readonly("demean", [](const G& g) { return g.acc.demean(); })
         .def_property_readonly("state_bytes", [](G& g) {
             G::Use use(g);

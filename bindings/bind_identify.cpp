@@ -59,6 +59,7 @@ void modaluq::python::bind_identify(py::module_& m) {
         .def_readonly("too_few_blocks", &Identification::too_few_blocks)
         .def_readonly("numerical_rank", &Identification::numerical_rank)
         .def_readonly("signal_to_noise", &Identification::signal_to_noise)
+        .def_readonly("low_signal_to_noise", &Identification::low_signal_to_noise)
         .def_readonly("warnings", &Identification::warnings);
 
     m.def("identify", py::overload_cast<const ConstRef&, const ConstRef&, IdentifyOptions>(&identify),

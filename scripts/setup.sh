@@ -47,14 +47,18 @@ if [[ "${MODALUQ_NATIVE:-OFF}" == "ON" ]]; then native=(-Ccmake.define.MODALUQ_N
 # a second run recompiles only what changed (with pip's isolated build environments the include
 # paths change every time and everything is rebuilt).
 "$venv/bin/python" -m pip install -q "scikit-build-core>=0.10" "pybind11>=2.11" ninja
+: >"$log"  # exists before tail follows it, and holds only this build
 "$venv/bin/python" -m pip install -v --no-build-isolation ".[$extras]" "${native[@]}" >"$log" 2>&1 </dev/null &
 pid=$!
+trap 'kill "$pid" 2>/dev/null' EXIT  # a killed setup leaves no compiler running
 # Progress: the build's own [k/n] lines as they appear.
 tail -n +1 -f "$log" --pid="$pid" 2>/dev/null | grep --line-buffered -E '^\s*\[ *[0-9]+(/[0-9]+|%)\] (Building|Linking)' \
   | sed -u -E 's/^\s*/   /; s/ (CXX|object|shared module) / /g' || true
 if ! wait "$pid"; then
+  trap - EXIT
   echo "pip install failed; the last lines of $log:" >&2
   tail -n 40 "$log" >&2
   exit 1
 fi
+trap - EXIT
 echo "== installed: $("$venv/bin/python" -c 'import modaluq; print("modaluq", modaluq.__version__)') in $venv"

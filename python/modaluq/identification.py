@@ -187,7 +187,10 @@ class Modes:
 
     @classmethod
     def _from_core(cls, m) -> "Modes":
-        has_std = m.frequency_std.size == m.frequency_hz.size and not np.isnan(m.singular_value_gap)
+        # A run with uncertainty fills the std arrays of every order; a degenerate order has no
+        # gap statistic, but its (empty) covariance has the (2+2l)^2 rows of a run with uncertainty.
+        has_std = m.frequency_std.size == m.frequency_hz.size and (
+            not np.isnan(m.singular_value_gap) or m.covariance.shape[0] > 0)
         l = m.mode_shape.shape[0]
         npar = 2 + 2 * l
         cov = None
@@ -288,6 +291,7 @@ class Result:
     too_few_blocks: bool = False
     numerical_rank: int = 0           #: singular values of H above max(a, b) eps s_1; higher orders are degenerate
     signal_to_noise: float = float("nan")  #: s_1 of H over its standard deviation (NaN without uncertainty)
+    low_signal_to_noise: bool = False  #: signal_to_noise < 3: the modes cannot be told from estimation noise
     warnings: tuple = field(default_factory=tuple)
 
     @property
@@ -381,6 +385,7 @@ def _result_from_core(ident, settings, n_outputs, n_inputs) -> Result:
         too_few_blocks=bool(ident.too_few_blocks),
         numerical_rank=int(ident.numerical_rank),
         signal_to_noise=float(ident.signal_to_noise),
+        low_signal_to_noise=bool(ident.low_signal_to_noise),
         warnings=tuple(ident.warnings),
     )
 

@@ -57,7 +57,7 @@ class CovarianceAccumulator:
         layout.references = [] if references is None else _integers("references", references, minimum=0)
         # first_sample counts a whole stream (months of samples), not one array: only the core's
         # 64-bit index bounds it
-        self._acc = _core.CovarianceAccumulator(layout, _integer("block_length", block_length, minimum=1),
+        self._acc = _core.CovarianceAccumulator(layout, _integer("block_length", block_length, minimum=1, maximum=2**50),
                                                 _boolean("demean", demean),
                                                 _integer("first_sample", first_sample, minimum=0, maximum=2**62))
 

@@ -57,6 +57,23 @@ TEST_CASE("outputs passed as inputs: H is numerically zero and the record is ref
     // With genuine inputs H stands far above its estimation noise.
     const auto id = modaluq::identify(s.y, s.u, opts(s.fs, 8, {4, 6}));
     CHECK(id.signal_to_noise > 5.0);
+    CHECK(!id.low_signal_to_noise);
+}
+
+TEST_CASE("order 1 alone is a valid request; a short record near its noise is a warning, not a refusal") {
+    const Sim s = simulate(3, {0, 1, 2}, 6000, 4, false, 1.0, 0.05);
+    const auto one = modaluq::identify(s.y, MatrixXd(), opts(s.fs, 8, {1}));
+    CHECK(one.at_order(1).n_modes() == 0);  // one real eigenvalue: no oscillating mode
+    CHECK(!one.at_order(1).degenerate);
+    const Sim short_rec = simulate(3, {0, 1, 2}, 300, 2, false, 1.0, 0.05);
+    auto o = opts(short_rec.fs, 4, {4, 6});
+    const auto id = modaluq::identify(short_rec.y, MatrixXd(), o);
+    if (id.low_signal_to_noise) {
+        bool warned = false;
+        for (const auto& w : id.warnings) warned = warned || contains(w, "estimation noise");
+        CHECK(warned);
+    }
+    CHECK(id.signal_to_noise > 0.0);
 }
 
 TEST_CASE("degenerate records are refused with the reason; degenerate orders are flags") {
@@ -86,6 +103,10 @@ TEST_CASE("degenerate records are refused with the reason; degenerate orders are
             CHECK(id.at_order(o).degenerate);
             CHECK(id.at_order(o).n_modes() == 0);
             CHECK(contains(id.at_order(o).note, "numerical rank"));
+            // Shaped like zero modes of a run with uncertainty: l rows, std arrays present.
+            CHECK(id.at_order(o).mode_shape.rows() == 3);
+            CHECK(id.at_order(o).covariance.rows() == (2 + 2 * 3) * (2 + 2 * 3));
+            CHECK(id.at_order(o).frequency_std.size() == 0);
         }
         bool warned = false;
         for (const auto& w : id.warnings) warned = warned || contains(w, "use orders <= 2");

@@ -223,3 +223,42 @@ def test_accumulator_state_grows_with_blocks_not_samples(sim):
     few_long.push(y)
     few_short.push(y[:40_000])
     assert few_long.state_bytes == few_short.state_bytes
+
+
+def test_order_one_alone_is_accepted():
+    s = modaluq.simulate(20_000, seed=1)
+    r = modaluq.identify(s.y, s.u, fs=s.fs, block_rows=15, orders=[1], uncertainty=False)
+    assert r.at_order(1).n_modes == 0 and not r.at_order(1).degenerate
+
+
+def test_a_short_record_near_its_noise_is_a_warning_not_a_refusal():
+    # The signal-to-noise statistic comes from the blocks: a short record with real dynamics can
+    # fall below 3 by chance; it is reported (flag + warning), and identified as without uncertainty.
+    s = modaluq.simulate(600, seed=0)
+    kw = dict(fs=s.fs, block_rows=6, orders=[4, 6], n_blocks=10)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        r = modaluq.identify(s.y, **kw)
+    plain = modaluq.identify(s.y, uncertainty=False, **kw)
+    np.testing.assert_allclose(r.at_order(6).frequency_hz, plain.at_order(6).frequency_hz, rtol=1e-12)
+    assert r.low_signal_to_noise == (r.signal_to_noise < 3)
+    if r.low_signal_to_noise:
+        assert any("estimation noise" in str(w.message) for w in caught)
+
+
+def test_a_degenerate_order_keeps_the_uncertainty_of_the_others_in_the_diagram():
+    # A degenerate order used to look like "no uncertainty", which switched the sigma criteria
+    # of the stabilization diagram off for every order.
+    t = np.arange(6000) / 50.0
+    rng = np.random.default_rng(0)
+    y = (np.sin(2 * np.pi * 3.0 * t) + np.sin(2 * np.pi * 7.0 * t))[:, None] * np.ones((1, 3))
+    y = y + 1e-9 * rng.standard_normal(y.shape)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", modaluq.ModalUQWarning)
+        r = modaluq.identify(y, orders=[2, 4, 6], **KW)
+    m6 = r.at_order(6)
+    assert m6.degenerate and m6.has_uncertainty and m6.mode_shape.shape == (3, 0)
+    assert m6.covariance.shape == (0, 8, 8)
+    assert all(m.has_uncertainty for m in r.modes)
+    strict = r.stabilization_diagram(max_frequency_cov=1e-30)
+    assert "frequency std" in " ".join(str(x) for x in strict.to_dataframe()["reason"] if x)

@@ -80,6 +80,7 @@ struct Identification {
     /// s_1 / std(s_1): how far the largest singular value of H stands above its own estimation
     /// noise (NaN without uncertainty); identify refuses a record where it is below 3.
     double signal_to_noise = std::numeric_limits<double>::quiet_NaN();
+    bool low_signal_to_noise = false;    ///< signal_to_noise < 3: the modes cannot be told from estimation noise
     std::vector<std::string> warnings;   ///< what the flags above mean for this run, in words
 
     /// The modes at model order n (throws invalid_argument if n was not requested).
@@ -97,6 +98,30 @@ namespace detail {
 inline constexpr double kNumericallyZero = 1e-8;
 /// s_1 / std(s_1) below which H is indistinguishable from its estimation noise.
 inline constexpr double kMinSignalToNoise = 3.0;
+
+/// An order without modes: every array empty but with the shapes of zero modes (l rows for the
+/// shapes), the uncertainty arrays present when the run has uncertainty, so that code reading
+/// all orders alike needs no special case.
+inline Modes degenerate_modes(Index order, Index n_outputs, bool with_uncertainty) {
+    Modes m;
+    m.order = order;
+    m.degenerate = true;
+    m.eigenvalue.resize(0);
+    m.frequency_hz.resize(0);
+    m.damping_ratio.resize(0);
+    m.mode_shape.resize(n_outputs, 0);
+    m.reference_component.resize(0);
+    if (with_uncertainty) {
+        const Index np = 2 + 2 * n_outputs;
+        m.frequency_std.resize(0);
+        m.damping_std.resize(0);
+        m.mode_shape_std_real.resize(n_outputs, 0);
+        m.mode_shape_std_imag.resize(n_outputs, 0);
+        m.covariance.resize(np * np, 0);
+        m.block_too_short.resize(0);
+    }
+    return m;
+}
 
 /// The identification proper; `t_r` is the covariance factor (empty without uncertainty).
 inline Identification identify_with_factor(const Covariances& cov, Eigen::MatrixXd t_r, IdentifyOptions options) {
@@ -137,7 +162,7 @@ inline Identification identify_with_factor(const Covariances& cov, Eigen::Matrix
     const Realization re(sub.H, L.n_outputs, n_max);
     out.singular_values = re.singular_values();
     out.numerical_rank = re.numerical_rank();
-    detail::require(re.max_order() >= 2, "the subspace matrix H has numerical rank ", re.numerical_rank(),
+    detail::require(re.numerical_rank() >= 2, "the subspace matrix H has numerical rank ", re.numerical_rank(),
                     ": the record holds no oscillation to identify (is y constant, a step or an impulse?)");
 
     std::unique_ptr<UncertaintyPropagator> prop;
@@ -156,20 +181,23 @@ inline Identification identify_with_factor(const Covariances& cov, Eigen::Matrix
         prop = std::make_unique<UncertaintyPropagator>(re, propagate_to_subspace(sub, cov, std::move(t_r)),
                                                        L.rows_past(), options.threads);
         out.signal_to_noise = re.singular_values()(0) / prop->singular_value_std(0);
-        detail::require(!(out.signal_to_noise < kMinSignalToNoise), "the subspace matrix H is at the level of its own "
-                        "estimation noise (largest singular value ", re.singular_values()(0), " is ",
-                        out.signal_to_noise, " standard deviations from zero, fewer than ", kMinSignalToNoise,
-                        "): there is nothing to identify (were outputs passed as inputs? is a sensor disconnected?)");
+        // A statistic of the blocks, so a warning, not a refusal: a short record with real
+        // dynamics can fall below it by chance (H numerically zero is refused above).
+        out.low_signal_to_noise = out.signal_to_noise < kMinSignalToNoise;
+        if (out.low_signal_to_noise)
+            out.warnings.push_back(detail::concat(
+                "the subspace matrix H is at the level of its own estimation noise (its largest singular value is ",
+                out.signal_to_noise, " standard deviations from zero, fewer than ", kMinSignalToNoise,
+                "): the modes cannot be told from noise; use a longer record or check the channels "
+                "(outputs passed as inputs? a disconnected sensor?)"));
     }
     // Orders are independent: highest (most expensive) first, on options.threads threads.
     const Index n_orders = static_cast<Index>(options.orders.size());
     out.modes.resize(options.orders.size());
     detail::parallel_for(n_orders, options.threads, [&](Index i) {
         const Index k = n_orders - 1 - i, n = options.orders[k];
-        Modes m;
-        m.order = n;
+        Modes m = degenerate_modes(n, L.n_outputs, prop != nullptr);
         if (n > re.max_order()) {
-            m.degenerate = true;
             m.note = detail::concat("order ", n, " is above the numerical rank of H (", re.numerical_rank(), ")");
         } else {
             try {
@@ -178,9 +206,7 @@ inline Identification identify_with_factor(const Covariances& cov, Eigen::Matrix
                 m = modes_from_system(ss, options.fs, prop ? &eig : nullptr);
                 if (prop) prop->apply(m, eig, ss, options.fs, block_seconds);
             } catch (const numerical_error& e) {
-                m = Modes();
-                m.order = n;
-                m.degenerate = true;
+                m = degenerate_modes(n, L.n_outputs, prop != nullptr);
                 m.note = e.what();
             }
         }

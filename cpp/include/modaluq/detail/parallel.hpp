@@ -7,7 +7,6 @@
 #include <algorithm>
 #include <atomic>
 #include <exception>
-#include <system_error>
 #include <thread>
 #include <vector>
 
@@ -39,9 +38,10 @@ void parallel_for(Index n, Index threads, Fn&& fn) {
     pool.reserve(static_cast<size_t>(nt - 1));
     // A thread the OS refuses (limits, memory) is not an error: the threads already running
     // and the calling thread share the work, and the results are the same.
+    // std::thread throws system_error, or bad_alloc for its state; either way fewer threads run.
     try {
         for (Index w = 1; w < nt; ++w) pool.emplace_back(worker, w);
-    } catch (const std::system_error&) {
+    } catch (...) {
     }
     worker(0);
     for (auto& t : pool) t.join();
