@@ -162,10 +162,16 @@ def test_ctrl_c_during_a_parser_hang(tmp_path, monkeypatch):
 
     p = _hanging_h5(tmp_path)
     monkeypatch.setattr(mio, "PARSE_TIMEOUT", 60.0)
+    # A process started in the background by a non-interactive shell inherits SIGINT ignored,
+    # and Python then installs no KeyboardInterrupt handler: install it for this test.
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
     threading.Timer(1.0, os.kill, (os.getpid(), signal.SIGINT)).start()
     t0 = time.monotonic()
-    with pytest.raises(KeyboardInterrupt):
-        load(p)
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            load(p)
+    finally:
+        signal.signal(signal.SIGINT, previous)
     assert time.monotonic() - t0 < 20  # not the 60 s limit: Ctrl-C works again
     monkeypatch.setattr(mio, "PARSE_TIMEOUT", 0.5)
     with raises_naming(p, "did not finish"):  # a fresh helper after the killed one
