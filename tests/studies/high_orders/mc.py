@@ -13,6 +13,7 @@ import warnings
 import numpy as np
 import modaluq
 
+from modaluq.validation.montecarlo import match_modes  # the validation tool's rule
 from prop import covariances, Record
 
 warnings.simplefilter("ignore")
@@ -25,25 +26,6 @@ VARIANTS = ["base"] + [f"k{k:g}" for k in KAPPAS] + ["k2x"]
 CONFIGS = ("OO", "IO", "IO0")
 # groups of the baseline decomposition of var(f) (pairs i != j, j < n)
 GROUPS = ["within", "phys-x-close", "phys-x-far", "noise-x-close", "noise-x-far", "ds"]
-
-
-def match_modes(f, ft, tol=0.05):
-    """Same rule as modaluq.validation.montecarlo.match_modes."""
-    f = np.asarray(f)
-    width = tol * ft
-    gaps = np.diff(ft) / 2
-    half = np.full(ft.size, np.inf)
-    half[:-1] = gaps
-    half[1:] = np.minimum(half[1:], gaps)
-    width = np.minimum(width, half)
-    out = np.full(ft.size, -1)
-    if f.size == 0:
-        return out
-    d = np.abs(f[None, :] - ft[:, None])
-    near = np.argmin(d, axis=1)
-    hit = d[np.arange(ft.size), near] < width
-    out[hit] = near[hit]
-    return out
 
 
 def group_masks(rec, n, n_true=12, zc=3.0):

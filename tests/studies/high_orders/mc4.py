@@ -13,55 +13,13 @@ import warnings
 import numpy as np
 import modaluq
 
+from mc import CONFIGS, GROUPS, ORDERS, P, group_masks, match_modes
 from prop import covariances, Record, factors2, trailing_norms, noise_floor, factor_noise_columns
 
 warnings.simplefilter("ignore")
 
-P = 15
-ORDERS = (12, 24, 36)
-
 # variants: 0 = baseline, 1.. = full mask kappa, then across-only kappa=2 (must equal full)
 VARIANTS = ["base", "d3", "d5", "w1", "w1.5", "w2"]
-CONFIGS = ("OO", "IO", "IO0")
-# groups of the baseline decomposition of var(f) (pairs i != j, j < n)
-GROUPS = ["within", "phys-x-close", "phys-x-far", "noise-x-close", "noise-x-far", "ds"]
-
-
-def match_modes(f, ft, tol=0.05):
-    """Same rule as modaluq.validation.montecarlo.match_modes."""
-    f = np.asarray(f)
-    width = tol * ft
-    gaps = np.diff(ft) / 2
-    half = np.full(ft.size, np.inf)
-    half[:-1] = gaps
-    half[1:] = np.minimum(half[1:], gaps)
-    width = np.minimum(width, half)
-    out = np.full(ft.size, -1)
-    if f.size == 0:
-        return out
-    d = np.abs(f[None, :] - ft[:, None])
-    near = np.argmin(d, axis=1)
-    hit = d[np.arange(ft.size), near] < width
-    out[hit] = near[hit]
-    return out
-
-
-def group_masks(rec, n, n_true=12, zc=3.0):
-    r = len(rec.s)
-    i = np.arange(r)[:, None]
-    j = np.arange(r)[None, :]
-    within = (i < n) & (j < n)
-    across = (i >= n) & (j < n)
-    close = rec.gap_z < zc
-    phys = j < n_true
-    m = {
-        "within": within,
-        "phys-x-close": across & phys & close,
-        "phys-x-far": across & phys & ~close,
-        "noise-x-close": across & ~phys & close,
-        "noise-x-far": across & ~phys & ~close,
-    }
-    return {k: v.astype(float) for k, v in m.items()}
 
 
 def main():

@@ -13,7 +13,7 @@ import numpy as np
 import modaluq
 
 from prop import covariances, Record
-from mc import match_modes
+from modaluq.validation.montecarlo import match_modes
 
 warnings.simplefilter("ignore")
 NBS = (25, 50, 100)

@@ -2,7 +2,7 @@
 sigma_base/sigma_fix > 5 for f or xi), order 24/36, 30 records. usage: OPENBLAS_NUM_THREADS=1 python3 spurious.py"""
 import numpy as np, modaluq, warnings
 from prop import covariances, Record, trailing_norms, noise_floor, factor_noise_columns
-from mc import match_modes
+from modaluq.validation.montecarlo import match_modes
 warnings.simplefilter("ignore")
 rows = []
 for k in range(30):
