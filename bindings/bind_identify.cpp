@@ -26,6 +26,8 @@ void modaluq::python::bind_identify(py::module_& m) {
         .def_readonly("block_too_short", &Modes::block_too_short)
         .def_readonly("singular_value_gap", &Modes::singular_value_gap)
         .def_readonly("close_singular_values", &Modes::close_singular_values)
+        .def_readonly("noise_coupling", &Modes::noise_coupling)
+        .def_readonly("noise_coupled", &Modes::noise_coupled)
         .def_readonly("degenerate", &Modes::degenerate)
         .def_readonly("note", &Modes::note);
 
@@ -41,6 +43,9 @@ void modaluq::python::bind_identify(py::module_& m) {
         .def_readwrite("demean", &IdentifyOptions::demean)
         .def_readwrite("input_rcond", &IdentifyOptions::input_rcond)
         .def_readwrite("threads", &IdentifyOptions::threads)
+        .def_readwrite("freeze_noise", &IdentifyOptions::freeze_noise)
+        .def_readwrite("noise_floor_factor", &IdentifyOptions::noise_floor_factor)
+        .def_readwrite("noise_coupling_limit", &IdentifyOptions::noise_coupling_limit)
         .def("validate", &IdentifyOptions::validate)
         .def_property_readonly_static("max_threads", [](py::object) { return IdentifyOptions::kMaxThreads; })
         .def("layout", &IdentifyOptions::layout, py::arg("n_outputs"), py::arg("n_inputs"));
@@ -60,6 +65,7 @@ void modaluq::python::bind_identify(py::module_& m) {
         .def_readonly("numerical_rank", &Identification::numerical_rank)
         .def_readonly("signal_to_noise", &Identification::signal_to_noise)
         .def_readonly("low_signal_to_noise", &Identification::low_signal_to_noise)
+        .def_readonly("significant_singular_values", &Identification::significant_singular_values)
         .def_readonly("warnings", &Identification::warnings);
 
     m.def("identify", py::overload_cast<const ConstRef&, const ConstRef&, IdentifyOptions>(&identify),

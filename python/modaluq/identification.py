@@ -137,7 +137,8 @@ def _sampling_frequency(fs) -> float:
 
 
 def core_options(*, fs, block_rows, past_block_rows=None, orders, n_blocks=50, references=None,
-                 uncertainty=True, demean=True, input_rcond=1e-10, threads=1) -> "_core.IdentifyOptions":
+                 uncertainty=True, demean=True, input_rcond=1e-10, threads=1, freeze_noise=True,
+                 noise_coupling_limit=5.0) -> "_core.IdentifyOptions":
     """Check the settings of :func:`identify` and return them as the core's options struct."""
     o = _core.IdentifyOptions()
     o.fs = _sampling_frequency(fs)
@@ -150,6 +151,8 @@ def core_options(*, fs, block_rows, past_block_rows=None, orders, n_blocks=50, r
     o.demean = _boolean("demean", demean)
     o.input_rcond = _real("input_rcond", input_rcond, low=0, high=1, high_open=True)
     o.threads = _integer("threads", threads, minimum=1, maximum=MAX_THREADS)
+    o.freeze_noise = _boolean("freeze_noise", freeze_noise)
+    o.noise_coupling_limit = _real("noise_coupling_limit", noise_coupling_limit, low=1)
     o.validate()
     return o
 
@@ -181,7 +184,9 @@ class Modes:
     covariance: np.ndarray | None = None         #: (n_modes, 2+2l, 2+2l) of [f, xi, Re shape, Im shape]
     block_too_short: np.ndarray | None = None    #: (n_modes,) blocks shorter than half the decay time
     singular_value_gap: float = float("nan")     #: (s_n - s_{n+1}) / its std
-    close_singular_values: bool = False          #: the order cuts singular values within 3 std
+    close_singular_values: bool = False          #: the order cuts significant singular values within 3 std
+    noise_coupling: np.ndarray | None = None     #: (n_modes,) sigma unfrozen / frozen (uq-math §5.5), 1 up to k*
+    noise_coupled: np.ndarray | None = None      #: (n_modes,) no first-order sigma: unfrozen (large) sigma kept
     degenerate: bool = False                     #: no modes: above the numerical rank of H, or A not decomposable
     note: str = ""                               #: why the order is degenerate
 
@@ -212,6 +217,8 @@ class Modes:
             block_too_short=m.block_too_short if has_std else None,
             singular_value_gap=float(m.singular_value_gap),
             close_singular_values=bool(m.close_singular_values),
+            noise_coupling=m.noise_coupling if has_std else None,
+            noise_coupled=m.noise_coupled if has_std else None,
             degenerate=bool(m.degenerate),
             note=str(m.note),
         )
@@ -292,6 +299,9 @@ class Result:
     numerical_rank: int = 0           #: singular values of H above max(a, b) eps s_1; higher orders are degenerate
     signal_to_noise: float = float("nan")  #: s_1 of H over its standard deviation (NaN without uncertainty)
     low_signal_to_noise: bool = False  #: signal_to_noise < 3: the modes cannot be told from estimation noise
+    #: k*, the noise floor of H (uq-math §5.5): singular values above their own estimation error;
+    #: an estimate of the model order (0 without uncertainty)
+    significant_singular_values: int = 0
     warnings: tuple = field(default_factory=tuple)
 
     @property
@@ -386,6 +396,7 @@ def _result_from_core(ident, settings, n_outputs, n_inputs) -> Result:
         numerical_rank=int(ident.numerical_rank),
         signal_to_noise=float(ident.signal_to_noise),
         low_signal_to_noise=bool(ident.low_signal_to_noise),
+        significant_singular_values=int(ident.significant_singular_values),
         warnings=tuple(ident.warnings),
     )
 
@@ -402,6 +413,8 @@ def _settings(o, n_outputs) -> dict:
         "demean": o.demean,
         "input_rcond": o.input_rcond,
         "threads": o.threads,
+        "freeze_noise": o.freeze_noise,
+        "noise_coupling_limit": o.noise_coupling_limit,
     }
 
 
@@ -413,7 +426,7 @@ def _warn(result: Result, stacklevel: int = 3) -> None:
 def identify(y, u=None, *, fs: float, block_rows: int, past_block_rows: int | None = None,
              orders: int | Sequence[int], n_blocks: int = 50, references: Sequence[int] | None = None,
              uncertainty: bool = True, demean: bool = True, input_rcond: float = 1e-10,
-             threads: int = 1) -> Result:
+             threads: int = 1, freeze_noise: bool = True, noise_coupling_limit: float = 5.0) -> Result:
     """Identify modes by covariance-driven SSI, with their standard deviations.
 
     Parameters
@@ -451,6 +464,18 @@ def identify(y, u=None, *, fs: float, block_rows: int, past_block_rows: int | No
         on one BLAS thread during the call (unless ``OPENBLAS_NUM_THREADS`` is set), so
         ``threads`` is the only parallelism and parallel processes do not oversubscribe.
 
+    freeze_noise : bool
+        Hold the directions of the singular vectors below the noise floor fixed in the
+        propagation (default True; docs/uq-math.md §5.5). Above the true order, the rotations
+        among noise singular vectors are not determined by the data and, left free, inflate
+        the standard deviations of physical poles by up to tens of times. False gives the
+        plain first-order propagation.
+    noise_coupling_limit : float
+        A pole whose sigma_f or sigma_xi shrinks by more than this factor (>= 1, default 5)
+        when the noise directions are frozen is flagged ``Modes.noise_coupled``: it is
+        spurious or mixed with a spurious pole, no first-order value is meaningful, and it
+        keeps the unfrozen, conservative standard deviations.
+
     Returns
     -------
     Result
@@ -467,7 +492,8 @@ def identify(y, u=None, *, fs: float, block_rows: int, past_block_rows: int | No
     """
     o = core_options(fs=fs, block_rows=block_rows, past_block_rows=past_block_rows, orders=orders,
                      n_blocks=n_blocks, references=references, uncertainty=uncertainty, demean=demean,
-                     input_rcond=input_rcond, threads=threads)
+                     input_rcond=input_rcond, threads=threads, freeze_noise=freeze_noise,
+                     noise_coupling_limit=noise_coupling_limit)
     y = as_samples(y, "y")
     u = as_samples(u, "u", allow_none=True)
     if u is not None and u.shape[0] != y.shape[0]:

@@ -101,13 +101,13 @@ class CovarianceAccumulator:
         return self._acc.finish(_boolean("with_blocks", with_blocks))
 
     def identify(self, *, fs: float, orders, uncertainty: bool = True, input_rcond: float = 1e-10,
-                 threads: int = 1) -> Result:
+                 threads: int = 1, freeze_noise: bool = True, noise_coupling_limit: float = 5.0) -> Result:
         """Identify from everything pushed so far (see :func:`modaluq.identify`)."""
         layout = self._acc.layout
         o = core_options(fs=fs, block_rows=layout.block_rows, past_block_rows=layout.past_block_rows or None,
                          orders=orders, n_blocks=2, references=list(layout.references) or None,
                          uncertainty=uncertainty, demean=self._acc.demean, input_rcond=input_rcond,
-                         threads=threads)
+                         threads=threads, freeze_noise=freeze_noise, noise_coupling_limit=noise_coupling_limit)
         cov = self._acc.finish(o.uncertainty)
         o.n_blocks = max(int(cov.n_blocks), 2)
         with single_threaded_blas():  # the covariance pass uses no BLAS; the propagation does

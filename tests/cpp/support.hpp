@@ -197,7 +197,9 @@ inline MatrixXd jacobian_H_R(const modaluq::Covariances& c, const modaluq::Subsp
 }
 
 // Explicit J_{Gamma,H} (a n x h) via B_j^+ C_j (uq-math §5.2).
-inline MatrixXd jacobian_Gamma_H(const modaluq::Realization& re, const MatrixXd& H, Index n) {
+// frozen_from = k*: columns j >= k* keep only the scale term (uq-math §5.5, eq. 5.13).
+inline MatrixXd jacobian_Gamma_H(const modaluq::Realization& re, const MatrixXd& H, Index n,
+                                 Index frozen_from = std::numeric_limits<Index>::max()) {
     const Index a = H.rows(), b = H.cols(), h = a * b;
     MatrixXd J(a * n, h);
     const MatrixXd Ia = MatrixXd::Identity(a, a), Ib = MatrixXd::Identity(b, b);
@@ -210,7 +212,8 @@ inline MatrixXd jacobian_Gamma_H(const modaluq::Realization& re, const MatrixXd&
         Cj.topRows(a) = kron(v.transpose(), Ia - u * u.transpose()) / s;
         Cj.bottomRows(b) = kron(u.transpose(), Ib - v * v.transpose()) * commutation(a, b) / s;
         const MatrixXd sol = pinv_drop<MatrixXd>(B, 1) * Cj;
-        J.middleRows(j * a, a) = u * kron(v, u).transpose() / (2.0 * std::sqrt(s)) + std::sqrt(s) * sol.topRows(a);
+        J.middleRows(j * a, a) = u * kron(v, u).transpose() / (2.0 * std::sqrt(s));
+        if (j < frozen_from) J.middleRows(j * a, a) += std::sqrt(s) * sol.topRows(a);
     }
     return J;
 }
@@ -281,14 +284,15 @@ inline std::vector<MatrixXd> jacobian_theta_AC(const modaluq::StateSpace& ss, do
 }
 
 // Explicit full path: covariance of theta per mode at order n (Sigma_R, Sigma_H, Sigma_Gamma formed).
-inline std::vector<MatrixXd> explicit_covariances(const modaluq::Covariances& c, double fs, Index n) {
+inline std::vector<MatrixXd> explicit_covariances(const modaluq::Covariances& c, double fs, Index n,
+                                                  Index frozen_from = std::numeric_limits<Index>::max()) {
     const modaluq::SubspaceMatrix s = modaluq::subspace_matrix(c);
     const modaluq::Realization re(s.H, c.layout.n_outputs, n);
     const MatrixXd TR = c.covariance_factor();
     const MatrixXd SigmaR = TR * TR.transpose();
     const MatrixXd JHR = jacobian_H_R(c, s);
     const MatrixXd SigmaH = JHR * SigmaR * JHR.transpose();
-    const MatrixXd JG = jacobian_Gamma_H(re, s.H, n);
+    const MatrixXd JG = jacobian_Gamma_H(re, s.H, n, frozen_from);
     const MatrixXd SigmaG = JG * SigmaH * JG.transpose();
     const MatrixXd JAC = jacobian_AC_Gamma(re.observability().leftCols(n), c.layout.n_outputs);
     const MatrixXd SigmaAC = JAC * SigmaG * JAC.transpose();

@@ -372,7 +372,8 @@ TEST_CASE("uncertainty flags") {
             const Index n = m.order;
             const double z = (s0(n - 1) - s0(n)) / (ds.row(n - 1) - ds.row(n)).norm();
             CHECK(std::abs(m.singular_value_gap - z) < 1e-5 * z);
-            CHECK(m.close_singular_values == (z < 3.0));
+            // Only a cut between significant singular values (order < k*) is flagged (§5.5).
+            CHECK(m.close_singular_values == (n < id.significant_singular_values && z < 3.0));
         }
     }
 
@@ -381,4 +382,181 @@ TEST_CASE("uncertainty flags") {
     const auto quiet = modaluq::identify(c.s.y, c.s.u, q);
     CHECK(quiet.at_order(6).frequency_std.size() == 0);
     CHECK(quiet.n_blocks == 0);
+}
+
+// ----------------------------------------------------------------------------- §5.5
+namespace {
+
+// 3-DOF chain (true order 6) with horizons that reach order 10: the orders above 6 keep noise
+// singular vectors, which the propagation freezes.
+Case make_high_case(bool io) {
+    Case c;
+    c.s = simulate(3, {0, 2}, 6000, 29, io, 1.0, 0.05, 20.0, false, 10.0);
+    c.o.fs = c.s.fs;
+    c.o.block_rows = 6;
+    c.o.past_block_rows = 6;
+    c.o.orders = {4, 6, 8, 10};
+    c.o.n_blocks = 20;
+    c.cov = modaluq::compute_covariances(c.s.y, io ? c.s.u : MatrixXd(), c.o.layout(2, io ? 1 : 0), c.o.n_blocks);
+    return c;
+}
+
+}  // namespace
+
+TEST_CASE("noise floor: delta_k and k* follow their definition (eqs. 5.10-5.12)") {
+    for (bool io : {false, true}) {
+        CAPTURE(io);
+        const Case c = make_high_case(io);
+        const auto sub = modaluq::subspace_matrix(c.cov);
+        const modaluq::Realization re(sub.H, 2, 10);
+        const MatrixXd TH = modaluq::propagate_to_subspace(sub, c.cov, c.cov.covariance_factor());
+        const Index a = sub.H.rows(), b = sub.H.cols(), r = re.singular_values().size();
+        // Every delta_k from explicit draws and a full SVD of each trailing block.
+        const MatrixXd eps = modaluq::detail::rademacher_signs(TH.cols(), modaluq::detail::kNoiseFloorDraws);
+        CHECK(eps.cwiseAbs().minCoeff() == 1.0);
+        CHECK(std::abs(eps.mean()) < 0.1);
+        VectorXd delta = VectorXd::Zero(r);
+        for (Index t = 0; t < eps.cols(); ++t) {
+            const VectorXd d = TH * eps.col(t);
+            const MatrixXd D = re.U().transpose() * Eigen::Map<const MatrixXd>(d.data(), a, b) * re.V();
+            for (Index k = 0; k < r; ++k)
+                delta(k) += std::pow(Eigen::JacobiSVD<MatrixXd>(D.bottomRightCorner(r - k, r - k)).singularValues()(0), 2);
+        }
+        delta = (delta / double(eps.cols())).cwiseSqrt();
+        Index k_ref = 11;
+        for (Index k = 0; k < 11; ++k)
+            if (re.singular_values()(k) < 1.5 * delta(k)) { k_ref = k; break; }
+        const auto nf = modaluq::detail::noise_floor(re, TH, b, 1.5, 11);
+        CHECK(nf.k == k_ref);
+        CHECK(nf.k == 6);  // the true order of the 3-DOF chain
+        for (Index k = 0; k < nf.delta.size(); ++k)
+            if (!std::isnan(nf.delta(k))) CHECK(std::abs(nf.delta(k) / delta(k) - 1) < 1e-12);
+        CHECK(!std::isnan(nf.delta(nf.k)));
+        // delta_k does not increase with k (what the skipping relies on).
+        for (Index k = 1; k < r; ++k) CHECK(delta(k) <= delta(k - 1) * (1 + 1e-12));
+        // The threads do not change it.
+        CHECK(modaluq::detail::noise_floor(re, TH, b, 1.5, 11, 3).delta.cwiseEqual(nf.delta).count() ==
+              (nf.delta.array() == nf.delta.array()).count());
+    }
+}
+
+TEST_CASE("noise floor: the power iteration of large trailing blocks is a tight lower bound") {
+    std::mt19937 gen(5);
+    std::normal_distribution<double> nd;
+    for (Index m : {80, 150}) {
+        CAPTURE(m);
+        MatrixXd H(m + 10, m), dh(m + 10, m);
+        for (Index i = 0; i < H.size(); ++i) H.data()[i] = nd(gen), dh.data()[i] = nd(gen);
+        const Eigen::BDCSVD<MatrixXd> svd(H, Eigen::ComputeThinU | Eigen::ComputeThinV);
+        const MatrixXd U = svd.matrixU(), V = svd.matrixV();
+        for (Index k : {0, 5}) {
+            const double est = modaluq::detail::trailing_norm(U, V, dh, k);
+            const MatrixXd D = U.rightCols(m - k).transpose() * dh * V.rightCols(m - k);
+            const double exact = Eigen::JacobiSVD<MatrixXd>(D).singularValues()(0);
+            CHECK(est <= exact * (1 + 1e-12));
+            CHECK(est >= 0.98 * exact);
+        }
+    }
+}
+
+TEST_CASE("frozen dGamma equals finite differences of Gamma with the noise directions held (eq. 5.13)") {
+    for (bool io : {false, true}) {
+        CAPTURE(io);
+        const Case c = make_high_case(io);
+        const Index n = 10, kf = 6;
+        const auto sub = modaluq::subspace_matrix(c.cov);
+        const modaluq::Realization re(sub.H, 2, n);
+        const MatrixXd TH = modaluq::propagate_to_subspace(sub, c.cov, c.cov.covariance_factor());
+        // Gamma~(H): u_j(H) sqrt s_j(H) for j < k*, u0_j sqrt s_j(H) for j >= k* (u0 nominal).
+        const auto gamma_tilde = [&](const MatrixXd& H) {
+            const modaluq::Realization rp(H, 2, n);
+            MatrixXd g = rp.observability();
+            for (Index j = kf; j < n; ++j) g.col(j) = re.U().col(j) * std::sqrt(rp.singular_values()(j));
+            return g;
+        };
+        const MatrixXd JG = jacobian_Gamma_H(re, sub.H, n, kf);
+        for (Index k : {0, 9}) {
+            const Eigen::Map<const MatrixXd> dH(TH.col(k).data(), sub.H.rows(), sub.H.cols());
+            const MatrixXd dg = modaluq::detail::gamma_perturbation(re, dH, n, nullptr, 0, kf);
+            const double h = 1e-6 * sub.H.norm() / dH.norm();
+            const MatrixXd fd = (gamma_tilde(sub.H + h * dH) - gamma_tilde(sub.H - h * dH)) / (2 * h);
+            CHECK(rel(dg, fd) < 1e-6);
+            CHECK(rel(dg.leftCols(kf), modaluq::detail::gamma_perturbation(re, dH, n).leftCols(kf)) < 1e-14);
+            const VectorXd explicit_dg = JG * TH.col(k);
+            CHECK(rel(Eigen::Map<const VectorXd>(dg.data(), dg.size()), explicit_dg) < 1e-9);
+        }
+    }
+}
+
+TEST_CASE("QStage's frozen Q matrices equal q_matrices of the frozen dGamma") {
+    for (bool io : {false, true}) {
+        CAPTURE(io);
+        const Case c = make_high_case(io);
+        const Index n = 10, l = 2, kf = 6;
+        const auto sub = modaluq::subspace_matrix(c.cov);
+        const modaluq::Realization re(sub.H, l, n);
+        const MatrixXd TH = modaluq::propagate_to_subspace(sub, c.cov, c.cov.covariance_factor());
+        const modaluq::detail::QStage stage(re, n + 1, kf);
+        REQUIRE(stage.freezes());
+        for (Index k : {0, 13}) {
+            const Eigen::Map<const MatrixXd> dH(TH.col(k).data(), sub.H.rows(), sub.H.cols());
+            modaluq::detail::QBlock base, frozen;
+            VectorXd ds(n + 1);
+            stage.compute(dH, base, &frozen, ds);
+            MatrixXd qa(n, n), qb(n, n), q4(l, n);
+            modaluq::detail::q_matrices(re.observability(), modaluq::detail::gamma_perturbation(re, dH, n, nullptr, 0, kf),
+                                        l, qa, qb, q4);
+            CHECK(rel(frozen.qa, qa) < 1e-10);
+            CHECK(rel(frozen.qb, qb) < 1e-10);
+            CHECK(rel(frozen.q4, q4) < 1e-10);
+            modaluq::detail::q_matrices(re.observability(), modaluq::detail::gamma_perturbation(re, dH, n), l, qa, qb, q4);
+            CHECK(rel(base.qa, qa) < 1e-10);
+            CHECK(rel(base.q4, q4) < 1e-10);
+            // They differ only in rows and columns >= k*.
+            CHECK(rel(frozen.qa.topLeftCorner(kf, kf), base.qa.topLeftCorner(kf, kf)) == 0.0);
+            CHECK(rel(frozen.qb.topLeftCorner(kf, kf), base.qb.topLeftCorner(kf, kf)) == 0.0);
+        }
+    }
+}
+
+TEST_CASE("end to end with frozen noise: each pole equals the explicit frozen or plain path, by its flag") {
+    for (bool io : {false, true}) {
+        CAPTURE(io);
+        const Case c = make_high_case(io);
+        const auto id = modaluq::identify(c.cov, c.o);
+        auto plain_o = c.o;
+        plain_o.freeze_noise = false;
+        const auto plain = modaluq::identify(c.cov, plain_o);
+        const Index ks = id.significant_singular_values, np = 6;
+        CHECK(ks == 6);
+        CHECK(plain.significant_singular_values == ks);
+        Index flagged = 0, frozen = 0;
+        for (Index n : c.o.orders) {
+            CAPTURE(n);
+            const auto& m = id.at_order(n);
+            const auto& mp = plain.at_order(n);
+            if (n <= ks) {  // nothing frozen: bit for bit the plain propagation
+                CHECK((m.covariance.array() == mp.covariance.array()).all());
+                CHECK((m.noise_coupling.array() == 1.0).all());
+                continue;
+            }
+            const auto cov_frozen = explicit_covariances(c.cov, c.o.fs, n, ks);
+            const auto cov_plain = explicit_covariances(c.cov, c.o.fs, n);
+            REQUIRE(static_cast<Index>(cov_frozen.size()) == m.n_modes());
+            for (Index i = 0; i < m.n_modes(); ++i) {
+                CAPTURE(i);
+                const MatrixXd got = Eigen::Map<const MatrixXd>(m.covariance.col(i).data(), np, np);
+                const double rho = std::max({1.0, std::sqrt(cov_plain[i](0, 0) / cov_frozen[i](0, 0)),
+                                             std::sqrt(cov_plain[i](1, 1) / cov_frozen[i](1, 1))});
+                CHECK(std::abs(m.noise_coupling(i) / rho - 1) < 1e-8);
+                CHECK(m.noise_coupled(i) == (rho > c.o.noise_coupling_limit));
+                CHECK(rel(got, m.noise_coupled(i) ? cov_plain[i] : cov_frozen[i]) < 1e-10);
+                CHECK(rel(Eigen::Map<const MatrixXd>(mp.covariance.col(i).data(), np, np), cov_plain[i]) < 1e-10);
+                flagged += m.noise_coupled(i);
+                frozen += !m.noise_coupled(i) && rho > 1.0 + 1e-6;
+            }
+        }
+        CHECK(flagged > 0);  // both branches are exercised
+        CHECK(frozen > 0);
+    }
 }

@@ -6,8 +6,8 @@ explicitly from the samples, every Jacobian is an explicit (Kronecker) matrix, a
 covariances Sigma_R, Sigma_H, Sigma_Gamma and Sigma_{A,C} are all formed.  It is the
 reference the C++ core is checked against.
 
-Contract: /work/shared/design/conventions.md.  Math: /work/shared/design/uq-math.md; the
-section numbers (§) in the docstrings refer to that note.
+Contract: docs/conventions.md.  Math: docs/uq-math.md; the section numbers (§) in the
+docstrings refer to that note.
 
 Conventions used throughout
 * vec() is column-major (Fortran order): ``vec(X) = X.reshape(-1, order="F")``.
@@ -29,6 +29,8 @@ __all__ = [
     "gamma",
     "system_matrices",
     "jacobian_Gamma_H",
+    "rademacher_signs",
+    "noise_floor",
     "jacobian_AC_Gamma",
     "modes",
     "jacobian_theta_AC",
@@ -296,7 +298,7 @@ def system_matrices(Gamma, l):
     return A, C
 
 
-def jacobian_Gamma_H(H, n):
+def jacobian_Gamma_H(H, n, frozen_from=None):
     """Explicit J_{Gamma,H} (a*n x h), rows stacked column by column of Gamma (vec Gamma)
     (§5.1-§5.2):
 
@@ -306,6 +308,9 @@ def jacobian_Gamma_H(H, n):
 
     B_j^+ drops exactly one singular value (its null space is span [u_j; v_j]).
     J_{gamma_j,H} does not depend on n, so the rows for a lower order are leading rows.
+
+    ``frozen_from`` = k* freezes the columns j >= k* (§5.5): their direction u_j is held, so
+    only the first term (the scale, d sigma_j) remains.
     """
     H = np.asarray(H, dtype=np.float64)
     a, b = H.shape
@@ -323,10 +328,53 @@ def jacobian_Gamma_H(H, n):
             np.kron(vj[None, :], Ia - np.outer(uj, uj)),
             np.kron(uj[None, :], Ib - np.outer(vj, vj)) @ Pab,
         ]) / sj
-        duv = _pinv_drop_one(Bj) @ Cj                  # (a+b) x h : [du_j; dv_j]
         dsig = np.kron(vj, uj)[None, :]                # 1 x h : (v_j kron u_j)^T
-        J[j * a:(j + 1) * a, :] = np.outer(uj, dsig) / (2.0 * np.sqrt(sj)) + np.sqrt(sj) * duv[:a]
+        J[j * a:(j + 1) * a, :] = np.outer(uj, dsig) / (2.0 * np.sqrt(sj))
+        if frozen_from is None or j < frozen_from:
+            duv = _pinv_drop_one(Bj) @ Cj              # (a+b) x h : [du_j; dv_j]
+            J[j * a:(j + 1) * a, :] += np.sqrt(sj) * duv[:a]
     return J
+
+
+# --------------------------------------------------------------------------------------
+# §5.5: noise floor
+# --------------------------------------------------------------------------------------
+NOISE_FLOOR_DRAWS = 20
+NOISE_FLOOR_SEED = 0x6D6F64616C7571        # "modaluq"
+_M64 = (1 << 64) - 1
+
+
+def rademacher_signs(n_blocks, draws=NOISE_FLOOR_DRAWS):
+    """(n_blocks x draws) signs from SplitMix64 (Steele, Lea & Flood 2014) seeded with
+    NOISE_FLOOR_SEED: entry (b, t) is draw t*n_blocks + b, +1 when its top bit is clear (§5.5)."""
+    state = NOISE_FLOOR_SEED
+    eps = np.empty((n_blocks, draws))
+    for t in range(draws):
+        for b in range(n_blocks):
+            state = (state + 0x9E3779B97F4A7C15) & _M64
+            z = state
+            z = ((z ^ (z >> 30)) * 0xBF58476D1CE4E5B9) & _M64
+            z = ((z ^ (z >> 27)) * 0x94D049BB133111EB) & _M64
+            z ^= z >> 31
+            eps[b, t] = -1.0 if z >> 63 else 1.0
+    return eps
+
+
+def noise_floor(H, T_H, k_max, factor=1.5):
+    """k* of §5.5 (eq. 5.12), by the definition: the smallest k < min(k_max, r) with
+    s_k < factor * delta_k, delta_k = RMS_t ||(U^T dH_t V)[k:, k:]||_2 over the Rademacher
+    draws dH_t = unvec(T_H eps_t); min(k_max, r) if none.  Every delta_k is computed (no
+    skipping), with exact spectral norms.  Returns (k*, delta)."""
+    H = np.asarray(H, dtype=np.float64)
+    a, b = H.shape
+    U, s, Vt = svd_sorted(H)
+    k_max = min(int(k_max), len(s))
+    eps = rademacher_signs(T_H.shape[1])
+    D = [U.T @ unvec(T_H @ eps[:, t], a, b) @ Vt.T for t in range(eps.shape[1])]
+    delta = np.array([np.sqrt(np.mean([np.linalg.norm(d[k:, k:], 2) ** 2 for d in D]))
+                      for k in range(k_max)])
+    below = np.flatnonzero(s[:k_max] < factor * delta)
+    return (int(below[0]) if below.size else k_max), delta
 
 
 # --------------------------------------------------------------------------------------
@@ -467,7 +515,8 @@ def _orders_list(orders):
     return [int(o) for o in orders]
 
 
-def _identify(y, u, fs, p, q, orders, n_blocks, references, uncertainty, demean, path):
+def _identify(y, u, fs, p, q, orders, n_blocks, references, uncertainty, demean, path,
+              freeze_noise=True, noise_coupling_limit=5.0):
     q = p if q is None else int(q)
     p = int(p)
     orders = _orders_list(orders)
@@ -485,16 +534,23 @@ def _identify(y, u, fs, p, q, orders, n_blocks, references, uncertainty, demean,
     H = subspace_matrix(R1, R2, R3, R4)
     U, s, _ = svd_sorted(H)                    # SVD once (conventions)
 
+    k_star = None
     if uncertainty:
         T_R = cov["T_R"]
         J_HR = jacobian_H_R(R1, R2, R3, R4)
-        J_GH = jacobian_Gamma_H(H, n_max)      # rows of order n = leading a*n rows (§5.2)
-        if path == "explicit":
-            Sigma_R = T_R @ T_R.T
-            Sigma_H = J_HR @ Sigma_R @ J_HR.T
-            Sigma_G = J_GH @ Sigma_H @ J_GH.T
-        else:                                   # factor: U_Gamma = J_{Gamma,H} J_{H,R} T_R
-            T_G = J_GH @ (J_HR @ T_R)
+        k_star, _ = noise_floor(H, J_HR @ T_R, n_max + 1)
+        # Both propagations of §5.5: plain ("base") and with the columns j >= k* frozen.
+        variants = {"base": jacobian_Gamma_H(H, n_max)}  # rows of order n = leading a*n rows (§5.2)
+        if freeze_noise and k_star < n_max:
+            variants["frozen"] = jacobian_Gamma_H(H, n_max, frozen_from=k_star)
+        Sigma_G, T_G = {}, {}
+        for key, J_GH in variants.items():
+            if path == "explicit":
+                Sigma_R = T_R @ T_R.T
+                Sigma_H = J_HR @ Sigma_R @ J_HR.T
+                Sigma_G[key] = J_GH @ Sigma_H @ J_GH.T
+            else:                               # factor: U_Gamma = J_{Gamma,H} J_{H,R} T_R
+                T_G[key] = J_GH @ (J_HR @ T_R)
 
     result = {}
     for n in orders:
@@ -507,18 +563,38 @@ def _identify(y, u, fs, p, q, orders, n_blocks, references, uncertainty, demean,
             J_AC = jacobian_AC_Gamma(G, l)
             J_th = jacobian_theta_AC(A, C, fs, ref_index=md["ref_index"])
             nm, d = len(J_th), 2 + 2 * l
-            covm = np.zeros((nm, d, d))
-            if path == "explicit":
-                Sigma_AC = J_AC @ Sigma_G[:a * n, :a * n] @ J_AC.T
-                for i, J in enumerate(J_th):
-                    covm[i] = J @ Sigma_AC @ J.T
-            else:
-                T_AC = J_AC @ T_G[:a * n]
-                factors = np.zeros((nm, d, T_AC.shape[1]))
-                for i, J in enumerate(J_th):
-                    factors[i] = J @ T_AC
-                    covm[i] = factors[i] @ factors[i].T
-                res["factor"] = factors
+            keys = ["base"] + (["frozen"] if "frozen" in variants and n > k_star else [])
+            covs, facs = {}, {}
+            for key in keys:
+                covs[key] = np.zeros((nm, d, d))
+                if path == "explicit":
+                    Sigma_AC = J_AC @ Sigma_G[key][:a * n, :a * n] @ J_AC.T
+                    for i, J in enumerate(J_th):
+                        covs[key][i] = J @ Sigma_AC @ J.T
+                else:
+                    T_AC = J_AC @ T_G[key][:a * n]
+                    facs[key] = np.zeros((nm, d, T_AC.shape[1]))
+                    for i, J in enumerate(J_th):
+                        facs[key][i] = J @ T_AC
+                        covs[key][i] = facs[key][i] @ facs[key][i].T
+            # §5.5, eq. 5.14: the frozen covariance unless the noise directions inflate the std
+            # of f or xi by more than noise_coupling_limit.
+            covm = covs["base"].copy()
+            rho = np.ones(nm)
+            if "frozen" in covs:
+                sd_b = np.sqrt(np.clip(np.diagonal(covs["base"], axis1=1, axis2=2)[:, :2], 0, None))
+                sd_f = np.sqrt(np.clip(np.diagonal(covs["frozen"], axis1=1, axis2=2)[:, :2], 0, None))
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    ratio = np.where(sd_f > 0, sd_b / sd_f, np.where(sd_b > 0, np.inf, 1.0))
+                rho = np.maximum(1.0, ratio.max(axis=1))
+                use = rho <= noise_coupling_limit
+                covm[use] = covs["frozen"][use]
+                if path != "explicit":
+                    facs["base"][use] = facs["frozen"][use]
+            if path != "explicit":
+                res["factor"] = facs["base"]
+            res["noise_coupling"] = rho
+            res["noise_coupled"] = ~(rho <= noise_coupling_limit)
             var = np.clip(np.diagonal(covm, axis1=1, axis2=2), 0.0, None)   # nm x d
             std = np.sqrt(var)
             res["frequency_std"] = std[:, 0]
@@ -526,12 +602,14 @@ def _identify(y, u, fs, p, q, orders, n_blocks, references, uncertainty, demean,
             res["mode_shape_std_real"] = std[:, 2:2 + l].T.copy()
             res["mode_shape_std_imag"] = std[:, 2 + l:].T.copy()
             res["covariance"] = covm
+            res["significant_singular_values"] = k_star
         result[n] = res
     return result
 
 
 def identify(y, u=None, *, fs, block_rows, past_block_rows=None, orders, n_blocks=50,
-             references=None, uncertainty=True, demean=True):
+             references=None, uncertainty=True, demean=True, freeze_noise=True,
+             noise_coupling_limit=5.0):
     """SSI-cov identification with the **full explicit** delta-method path (§8).
 
     Sigma_R = T_R T_R^T; Sigma_H = J_{H,R} Sigma_R J_{H,R}^T; Sigma_Gamma =
@@ -539,20 +617,24 @@ def identify(y, u=None, *, fs, block_rows, past_block_rows=None, orders, n_block
     a*n block); Sigma_{A,C} = J_{AC,Gamma} Sigma_Gamma J_{AC,Gamma}^T; per mode
     Sigma_theta = J_theta Sigma_{A,C} J_theta^T with theta = [f, xi, Re phi~, Im phi~].
 
+    The noise floor k* and the frozen propagation of §5.5 apply as in the core
+    (``freeze_noise``, ``noise_coupling_limit``); each order's "significant_singular_values" is k*.
+
     Returns {order: dict} with frequency_hz, damping_ratio, mode_shape (l x nm complex),
     eigenvalues, ref_index and, when ``uncertainty``, frequency_std, damping_std,
     mode_shape_std_real (l x nm), mode_shape_std_imag (l x nm), covariance (nm x d x d).
     Raises ValueError for an order outside [1, min((p-1) l, q r)].
     """
     return _identify(y, u, fs, block_rows, past_block_rows, orders, n_blocks, references,
-                     uncertainty, demean, "explicit")
+                     uncertainty, demean, "explicit", freeze_noise, noise_coupling_limit)
 
 
 def identify_factor(y, u=None, *, fs, block_rows, past_block_rows=None, orders, n_blocks=50,
-                    references=None, uncertainty=True, demean=True):
+                    references=None, uncertainty=True, demean=True, freeze_noise=True,
+                    noise_coupling_limit=5.0):
     """Same as :func:`identify` but with the factor formulation (§8): U_theta =
     J_theta J_{AC,Gamma} J_{Gamma,H} J_{H,R} T_R, Sigma_theta = U_theta U_theta^T (std =
     row norms).  Each order's dict also has 'factor' (nm x d x n_blocks).  A second check
     of :func:`identify`; same explicit Jacobians, no Sigma_H formed."""
     return _identify(y, u, fs, block_rows, past_block_rows, orders, n_blocks, references,
-                     uncertainty, demean, "factor")
+                     uncertainty, demean, "factor", freeze_noise, noise_coupling_limit)

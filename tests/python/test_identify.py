@@ -15,6 +15,7 @@ from modaluq import _core
 SETTINGS = [
     (6, 7, None, [4, 8, 12]),
     (7, 5, [0, 2], [6, 10]),
+    (7, 7, None, [8, 12, 16, 18]),  # up to 1.5x the true order: noise columns frozen (§5.5)
 ]
 
 
@@ -22,17 +23,27 @@ def _pairs(ours, theirs):
     assert ours.n_modes == len(theirs["frequency_hz"]), (ours.frequency_hz, theirs["frequency_hz"])
 
 
+@pytest.mark.parametrize("freeze", [True, False], ids=["frozen noise", "plain"])
 @pytest.mark.parametrize("io", [False, True], ids=["output-only", "input/output"])
 @pytest.mark.parametrize("p,q,refs,orders", SETTINGS)
-def test_core_equals_oracle(chain, io, p, q, refs, orders):
+def test_core_equals_oracle(chain, io, p, q, refs, orders, freeze):
     u = chain.u if io else None
-    kw = dict(fs=chain.fs, block_rows=p, past_block_rows=q, orders=orders, n_blocks=20, references=refs)
+    kw = dict(fs=chain.fs, block_rows=p, past_block_rows=q, orders=orders, n_blocks=20, references=refs,
+              freeze_noise=freeze)
     ours = modaluq.identify(chain.y, u, **kw)
     ref = oracle.identify(chain.y, u, **kw)
     assert ours.orders == tuple(orders)
+    k_star = ref[orders[0]]["significant_singular_values"]
+    assert ours.significant_singular_values == k_star
+    if max(orders) > 12:
+        assert k_star < max(orders)  # the case exercises the freeze
     for n in orders:
         m, r = ours.at_order(n), ref[n]
         _pairs(m, r)
+        np.testing.assert_allclose(m.noise_coupling, r["noise_coupling"], rtol=1e-7)
+        np.testing.assert_array_equal(m.noise_coupled, r["noise_coupled"])
+        if not freeze or n <= k_star:
+            assert np.all(m.noise_coupling == 1.0) and not m.noise_coupled.any()
         np.testing.assert_allclose(m.frequency_hz, r["frequency_hz"], rtol=1e-9, atol=0)
         np.testing.assert_allclose(m.damping_ratio, r["damping_ratio"], rtol=1e-9, atol=0)
         np.testing.assert_allclose(m.mode_shape, r["mode_shape"], rtol=1e-8, atol=1e-8)

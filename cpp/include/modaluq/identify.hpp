@@ -38,6 +38,12 @@ struct IdentifyOptions {
     /// work (1 = the calling thread only). Results do not depend on it. Each thread's linear
     /// algebra is single-threaded, unless a BLAS with threads of its own is linked (gemm.hpp).
     Index threads = 1;
+    /// Freeze the directions of singular vectors from the noise floor k* on (uq-math §5.5).
+    bool freeze_noise = true;
+    double noise_floor_factor = 1.5;    ///< c of (5.12), > 0
+    /// rho_max of (5.14), >= 1: poles whose sigma_f or sigma_xi the noise directions inflate by
+    /// more are flagged noise_coupled and keep the unfrozen sigma.
+    double noise_coupling_limit = 5.0;
 
     void validate() const {
         detail::require(std::isfinite(fs) && fs > 0.0, "fs must be a finite sampling frequency > 0 Hz, got ", fs);
@@ -47,6 +53,9 @@ struct IdentifyOptions {
         for (Index n : orders) detail::require(n >= 1, "orders must be >= 1, got ", n);
         if (uncertainty) detail::require(n_blocks >= 2, "n_blocks must be >= 2, got ", n_blocks);
         detail::require(input_rcond >= 0.0 && input_rcond < 1.0, "input_rcond must be in [0, 1), got ", input_rcond);
+        detail::require(std::isfinite(noise_floor_factor) && noise_floor_factor > 0.0,
+                        "noise_floor_factor must be finite and > 0, got ", noise_floor_factor);
+        detail::require(noise_coupling_limit >= 1.0, "noise_coupling_limit must be >= 1, got ", noise_coupling_limit);
         detail::require(threads >= 1, "threads must be >= 1, got ", threads);
         detail::require(threads <= kMaxThreads, "threads must be <= ", kMaxThreads, ", got ", threads);
     }
@@ -81,6 +90,10 @@ struct Identification {
     /// noise (NaN without uncertainty); identify refuses a record where it is below 3.
     double signal_to_noise = std::numeric_limits<double>::quiet_NaN();
     bool low_signal_to_noise = false;    ///< signal_to_noise < 3: the modes cannot be told from estimation noise
+    /// k*, the noise floor (uq-math eq. 5.12): singular values of H above the size of the
+    /// estimation error of their trailing block; an estimate of the model order. At most the
+    /// largest order + 1 (that value also means "none below"). 0 without uncertainty.
+    Index significant_singular_values = 0;
     std::vector<std::string> warnings;   ///< what the flags above mean for this run, in words
 
     /// The modes at model order n (throws invalid_argument if n was not requested).
@@ -119,6 +132,8 @@ inline Modes degenerate_modes(Index order, Index n_outputs, bool with_uncertaint
         m.mode_shape_std_imag.resize(n_outputs, 0);
         m.covariance.resize(np * np, 0);
         m.block_too_short.resize(0);
+        m.noise_coupling.resize(0);
+        m.noise_coupled.resize(0);
     }
     return m;
 }
@@ -178,8 +193,13 @@ inline Identification identify_with_factor(const Covariances& cov, Eigen::Matrix
                 " parameters of a mode: use n_blocks >= ", 3 + 2 * L.n_outputs,
                 " (the standard deviations of f and xi alone are still estimated, but from few blocks)"));
         // T_H lives only while the propagator takes what it needs from it.
+        NoiseOptions noise;
+        noise.freeze = options.freeze_noise;
+        noise.floor_factor = options.noise_floor_factor;
+        noise.coupling_limit = options.noise_coupling_limit;
         prop = std::make_unique<UncertaintyPropagator>(re, propagate_to_subspace(sub, cov, std::move(t_r)),
-                                                       L.rows_past(), options.threads);
+                                                       L.rows_past(), options.threads, noise);
+        out.significant_singular_values = prop->significant_singular_values();
         out.signal_to_noise = re.singular_values()(0) / prop->singular_value_std(0);
         // A statistic of the blocks, so a warning, not a refusal: a short record with real
         // dynamics can fall below it by chance (H numerically zero is refused above).

@@ -41,9 +41,18 @@ struct Modes {
     Eigen::Array<bool, Eigen::Dynamic, 1> block_too_short;
     /// (sigma_n - sigma_{n+1}) / std(sigma_n - sigma_{n+1}); NaN without uncertainty.
     double singular_value_gap = std::numeric_limits<double>::quiet_NaN();
-    /// The order cuts singular values closer than three times their uncertainty, so its
-    /// first-order uncertainty is not meaningful (uq-math §5.4).
+    /// The order cuts between two significant singular values (order < k*, the noise floor)
+    /// that are closer than three times the std of their difference: a pair of modes may be
+    /// split, and the first-order uncertainty of this order is not meaningful (uq-math §5.4).
+    /// Cuts inside the noise (order >= k*) are not flagged: those directions are frozen (§5.5).
     bool close_singular_values = false;
+    /// Per mode, rho of uq-math (5.14): sigma_f or sigma_xi with the noise singular vectors free
+    /// to rotate, over the same with them frozen (1 at orders <= k*, where nothing is frozen).
+    Eigen::VectorXd noise_coupling;
+    /// Per mode, noise_coupling > IdentifyOptions::noise_coupling_limit: the pole depends mostly
+    /// on noise directions (a spurious pole, or a physical one mixed with a spurious one), no
+    /// first-order value is meaningful, and its std are the unfrozen, conservative ones.
+    Eigen::Array<bool, Eigen::Dynamic, 1> noise_coupled;
     /// No modes at this order: it is above the numerical rank of H, or (A, C) has no usable
     /// eigen-decomposition there (`note` says which). The other orders are unaffected.
     bool degenerate = false;

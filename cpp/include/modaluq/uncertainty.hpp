@@ -7,6 +7,7 @@
 /// Stages (each a function in `detail`, each finite-difference tested):
 ///  1. T_H = J_{H,R} T_R                               subspace.hpp
 ///  2. dGamma for j <= n_max, once                      gamma_perturbation
+///     (columns at or above the noise floor k* frozen, uq-math §5.5: noise_floor)
 ///     (the singular system B_j [du; dv] = C_j vec dH of uq-math §5.1 solved in the SVD
 ///     basis, where it is diagonal: same minimum-norm solution, no b x b solve per j)
 ///  3. Q1..Q4 once at n_max; order n uses their leading n x n blocks    q_matrices
@@ -22,6 +23,7 @@
 #include <vector>
 
 #include "detail/gemm.hpp"
+#include "detail/noise_floor.hpp"
 #include "detail/parallel.hpp"
 #include "modal.hpp"
 #include "realization.hpp"
@@ -66,8 +68,11 @@ inline SvdPerturbation svd_perturbation(const Realization& re, const Eigen::Ref<
 /// Stage 2: dGamma (a x n) for one perturbation dH of H, and d sigma_j for j < n_sigma:
 /// dGamma = (U Omega + P_n S^-1) S^{1/2} + U_n diag(d s_j / (2 sqrt s_j)), d s_j = Ua_jj
 /// (uq-math §5.1-5.3). The reference for the fused QStage below.
+/// With `frozen_from` = k < n, the columns j >= k are frozen (uq-math §5.5, eq. 5.13): D_j = 0,
+/// so only their scale moves, d gamma_j = u_j d s_j / (2 sqrt s_j).
 inline Eigen::MatrixXd gamma_perturbation(const Realization& re, const Eigen::Ref<const Eigen::MatrixXd>& dh,
-                                          Index n, Eigen::VectorXd* dsigma = nullptr, Index n_sigma = 0) {
+                                          Index n, Eigen::VectorXd* dsigma = nullptr, Index n_sigma = 0,
+                                          Index frozen_from = std::numeric_limits<Index>::max()) {
     const Eigen::MatrixXd& U = re.U();
     const Eigen::VectorXd& s = re.singular_values();
     const Index r = s.size();
@@ -77,6 +82,7 @@ inline Eigen::MatrixXd gamma_perturbation(const Realization& re, const Eigen::Re
     Eigen::MatrixXd dg(U.rows(), n);
     gemm(dg, U, Op::N, sp.omega, Op::N);
     dg += sp.P.leftCols(n) * s.head(n).cwiseInverse().asDiagonal();
+    if (frozen_from < n) dg.rightCols(n - std::max<Index>(frozen_from, 0)).setZero();
     dg = dg * sq.matrix().asDiagonal();
     dg += U.leftCols(n) * (sp.Ua.diagonal().head(n).array() / (2.0 * sq)).matrix().asDiagonal();
     return dg;
@@ -106,9 +112,19 @@ inline void q_matrices(const Eigen::MatrixXd& gamma, const Eigen::MatrixXd& dgam
 /// K_XY = U_{n,X}^T U_Y computed once. For X = Y = up (all rows but the last l), U^T U = I
 /// gives K = [I 0] - U_{n,bot}^T U_bot over the last l rows only, so Q1 is almost free and
 /// the a x r x n product U Omega is not needed: 8 n^2 a flops per block instead of 14.
+///
+/// Frozen columns (uq-math §5.5): every X above is, column by column, linear in column j of Omega
+/// and of P, so freezing columns j >= k* (D_j = 0) is zeroing those columns of the X's and of
+/// D_top; the E term keeps d s_j. Both sets of Q matrices come from one pass.
+struct QBlock {
+    Eigen::MatrixXd qa, qb, q4;  ///< Q3 + Q2^T, Q1 + Q1^T (n x n), dC (l x n)
+};
+
 class QStage {
 public:
-    QStage(const Realization& re, Index n_sigma) : re_(re), n_(re.max_order()), l_(re.n_outputs()), n_sigma_(n_sigma) {
+    /// @param frozen_from  k*: columns j >= k* are frozen in the second set of Q matrices
+    QStage(const Realization& re, Index n_sigma, Index frozen_from = std::numeric_limits<Index>::max())
+        : re_(re), n_(re.max_order()), l_(re.n_outputs()), n_sigma_(n_sigma), frozen_from_(frozen_from) {
         const Eigen::MatrixXd& U = re.U();
         const Index rows = U.rows() - l_, r = U.cols();
         k_.resize(2 * n_, r);  // [K_dw,up; K_up,dw]
@@ -122,6 +138,20 @@ public:
     /// d sigma_j for j < n_sigma.
     void compute(const Eigen::Ref<const Eigen::MatrixXd>& dh, Eigen::Ref<Eigen::MatrixXd> qa,
                  Eigen::Ref<Eigen::MatrixXd> qb, Eigen::Ref<Eigen::MatrixXd> q4,
+                 Eigen::Ref<Eigen::VectorXd> dsigma) const {
+        QBlock base;
+        compute(dh, base, nullptr, dsigma);
+        qa = base.qa;
+        qb = base.qb;
+        q4 = base.q4;
+    }
+
+    /// Whether a frozen set differs from the plain one (some column j < n_max is frozen).
+    bool freezes() const { return frozen_from_ < n_; }
+
+    /// The plain Q matrices in `base` and, if `frozen` is given and freezes(), those with the
+    /// columns j >= k* frozen.
+    void compute(const Eigen::Ref<const Eigen::MatrixXd>& dh, QBlock& base, QBlock* frozen,
                  Eigen::Ref<Eigen::VectorXd> dsigma) const {
         const Eigen::MatrixXd& U = re_.U();
         const Eigen::VectorXd& s = re_.singular_values();
@@ -153,17 +183,27 @@ public:
         const auto finish = [&](const Eigen::MatrixXd& x, const Eigen::Ref<const Eigen::MatrixXd>& gram) {
             return Eigen::MatrixXd(sq.asDiagonal() * (x * sq.asDiagonal() + gram * e.asDiagonal()));
         };
-        const Eigen::MatrixXd q1 = finish(x1, gram_up_);
-        const Eigen::MatrixXd q2 = finish(x23.topRows(n), k_.topLeftCorner(n, n));
-        const Eigen::MatrixXd q3 = finish(x23.bottomRows(n), k_.bottomLeftCorner(n, n));
-        qa = q3 + q2.transpose();
-        qb = q1 + q1.transpose();
-        q4 = d_top * sq.asDiagonal() + U.topLeftCorner(l, n) * e.asDiagonal();
+        const auto assemble = [&](QBlock& out) {
+            const Eigen::MatrixXd q1 = finish(x1, gram_up_);
+            const Eigen::MatrixXd q2 = finish(x23.topRows(n), k_.topLeftCorner(n, n));
+            const Eigen::MatrixXd q3 = finish(x23.bottomRows(n), k_.bottomLeftCorner(n, n));
+            out.qa = q3 + q2.transpose();
+            out.qb = q1 + q1.transpose();
+            out.q4 = d_top * sq.asDiagonal() + U.topLeftCorner(l, n) * e.asDiagonal();
+        };
+        assemble(base);
+        if (frozen && freezes()) {
+            const Index k = std::max<Index>(frozen_from_, 0), m = n - k;
+            x1.rightCols(m).setZero();
+            x23.rightCols(m).setZero();
+            d_top.rightCols(m).setZero();
+            assemble(*frozen);
+        }
     }
 
 private:
     const Realization& re_;
-    Index n_, l_, n_sigma_;
+    Index n_, l_, n_sigma_, frozen_from_;
     Eigen::MatrixXd k_;        ///< [U_{n,dw}^T U_up; U_{n,up}^T U_dw], 2 n x r
     Eigen::MatrixXd gram_up_;  ///< U_{n,up}^T U_{n,up} = I - U_{n,bot}^T U_{n,bot}
 };
@@ -342,6 +382,17 @@ inline Eigen::MatrixXd modal_perturbation(cd lambda, double fs, const Eigen::Vec
 
 }  // namespace detail
 
+/// How the propagation treats the singular vectors below the noise floor (uq-math §5.5).
+struct NoiseOptions {
+    /// Hold the directions of the singular vectors from the noise floor k* on fixed (their scale
+    /// still moves). false propagates every rotation, as first-order theory alone would.
+    bool freeze = true;
+    double floor_factor = 1.5;    ///< c of (5.12): k* is the first k with s_k < c delta_k
+    /// rho_max of (5.14): a pole whose sigma_f or sigma_xi shrinks by more than this factor when
+    /// the noise directions are frozen is noise-coupled; it keeps the unfrozen (larger) sigma.
+    double coupling_limit = 5.0;
+};
+
 /// Sensitivities computed once at the largest order and reused by every order.
 class UncertaintyPropagator {
 public:
@@ -349,25 +400,32 @@ public:
     /// @param t_h  T_H, (a b) x n_b: column k is vec dH^k (column-major)
     /// @param b    columns of H
     /// @param threads  threads for the per-block work (results do not depend on it)
-    UncertaintyPropagator(const Realization& re, const Eigen::MatrixXd& t_h, Index b, Index threads = 1)
-        : re_(re), nb_(t_h.cols()) {
+    UncertaintyPropagator(const Realization& re, const Eigen::MatrixXd& t_h, Index b, Index threads = 1,
+                          NoiseOptions noise = {})
+        : re_(re), nb_(t_h.cols()), noise_(noise) {
         const Index a = re.U().rows(), n = re.max_order(), l = re.n_outputs();
         const Index n_sigma = std::min<Index>(n + 1, re.singular_values().size());
         detail::require(t_h.rows() == a * b, "T_H must have a*b rows");
+        floor_ = detail::noise_floor(re, t_h, b, noise.floor_factor, n + 1, threads);
         dsigma_.resize(n_sigma, nb_);
         q_ = detail::BlockQ(nb_, n, l);
-        const detail::QStage stage(re, n_sigma);
+        const detail::QStage stage(re, n_sigma, noise.freeze ? floor_.k : std::numeric_limits<Index>::max());
+        if (stage.freezes()) qf_ = detail::BlockQ(nb_, n, l);
         detail::parallel_for(nb_, threads, [&](Index k) {  // blocks write disjoint elements
             Eigen::Map<const Eigen::MatrixXd> dh(t_h.col(k).data(), a, b);
-            Eigen::MatrixXd qa(n, n), qb(n, n), q4(l, n);
-            stage.compute(dh, qa, qb, q4, dsigma_.col(k));
-            q_.set(k, qa, qb, q4);
+            detail::QBlock base, frozen;
+            stage.compute(dh, base, &frozen, dsigma_.col(k));
+            q_.set(k, base.qa, base.qb, base.q4);
+            if (stage.freezes()) qf_.set(k, frozen.qa, frozen.qb, frozen.q4);
         });
     }
 
     Index n_blocks() const { return nb_; }
     /// Standard deviation of the singular value s_{j+1} of H (j < max_order + 1).
     double singular_value_std(Index j) const { return dsigma_.row(j).norm(); }
+    /// k*: singular values of H above the noise floor (eq. 5.12), at most max_order + 1.
+    Index significant_singular_values() const { return floor_.k; }
+    const detail::NoiseFloor& noise_floor() const { return floor_; }
 
     /// Fill the uncertainty fields of `modes` (order n) from its eigenstructure.
     /// @param block_seconds  duration of one block, N_b / fs, for the block-length check
@@ -382,23 +440,42 @@ public:
         modes.mode_shape_std_imag.resize(l, nm);
         modes.covariance.resize(np * np, nm);
         modes.block_too_short.resize(nm);
+        modes.noise_coupling = Eigen::VectorXd::Ones(nm);
+        modes.noise_coupled = Eigen::Array<bool, Eigen::Dynamic, 1>::Constant(nm, false);
 
-        // Singular-value gap at this order, judged against its own uncertainty.
+        // Singular-value gap at this order, judged against its own uncertainty. Only a cut
+        // between significant singular values matters: one in the noise is frozen (§5.5).
         const Eigen::VectorXd& s = re_.singular_values();
         const double sd_gap = (n < dsigma_.rows()) ? (dsigma_.row(n - 1) - dsigma_.row(n)).norm()
                                                    : dsigma_.row(n - 1).norm();
         modes.singular_value_gap = ((n < s.size()) ? s(n - 1) - s(n) : s(n - 1)) / sd_gap;
-        modes.close_singular_values = !(modes.singular_value_gap >= 3.0);
+        modes.close_singular_values = n < floor_.k && !(modes.singular_value_gap >= 3.0);
         if (nm == 0) return;
 
         const detail::OrderContext ctx(eig, ss, re_);
-        Eigen::MatrixXcd dlam;
-        std::vector<Eigen::MatrixXcd> dshape;
+        Eigen::MatrixXcd dlam, dlam_f;
+        std::vector<Eigen::MatrixXcd> dshape, dshape_f;
         detail::eigen_perturbation_blocks(ctx, q_, dlam, dshape);
+        const bool frozen = qf_.nb > 0 && n > floor_.k;  // orders up to k* have nothing frozen
+        if (frozen) detail::eigen_perturbation_blocks(ctx, qf_, dlam_f, dshape_f);
         for (Index i = 0; i < nm; ++i) {
             const Eigen::VectorXcd raw = ss.C.cast<cd>() * ctx.phi.col(i);
-            const Eigen::MatrixXd ut = detail::modal_perturbation(ctx.lambda(i), fs, raw, modes.reference_component(i),
-                                                                  dlam.row(i), dshape[i]);
+            const Index kref = modes.reference_component(i);
+            Eigen::MatrixXd ut = detail::modal_perturbation(ctx.lambda(i), fs, raw, kref, dlam.row(i), dshape[i]);
+            if (frozen) {
+                Eigen::MatrixXd ut_f =
+                    detail::modal_perturbation(ctx.lambda(i), fs, raw, kref, dlam_f.row(i), dshape_f[i]);
+                // rho of (5.14): how much of sigma_f or sigma_xi the noise directions carry.
+                double rho = 1.0;
+                for (Index row : {0, 1}) {
+                    const double plain = ut.row(row).norm(), fixed = ut_f.row(row).norm();
+                    rho = std::max(rho, fixed > 0.0 ? plain / fixed
+                                                    : (plain > 0.0 ? std::numeric_limits<double>::infinity() : 1.0));
+                }
+                modes.noise_coupling(i) = rho;
+                modes.noise_coupled(i) = !(rho <= noise_.coupling_limit);
+                if (!modes.noise_coupled(i)) ut = std::move(ut_f);
+            }
             const Eigen::MatrixXd cov = ut * ut.transpose();
             modes.covariance.col(i) = Eigen::Map<const Eigen::VectorXd>(cov.data(), np * np);
             const Eigen::VectorXd sd = cov.diagonal().cwiseMax(0.0).cwiseSqrt();
@@ -414,8 +491,11 @@ public:
 private:
     const Realization& re_;
     Index nb_;
+    NoiseOptions noise_;
+    detail::NoiseFloor floor_;
     Eigen::MatrixXd dsigma_;  ///< d sigma_j per block, j < n_max + 1
     detail::BlockQ q_;        ///< Q1..Q4 of every block at n_max
+    detail::BlockQ qf_;       ///< the same with the noise columns frozen (empty if none is)
 };
 
 }  // namespace modaluq
