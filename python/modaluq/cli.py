@@ -50,16 +50,19 @@ def integer_option(minimum: int, maximum: int = MAX_COUNT):
     return parse
 
 
-def real_option(low: float, high: float, *, high_open: bool = False):
-    """An argparse ``type``: a finite number in (low, high] (or (low, high))."""
+def real_option(low: float, high: float = math.inf, *, high_open: bool = False, low_open: bool = True):
+    """An argparse ``type``: a finite number in (low, high] (or [low, ...), (..., high))."""
 
     def parse(text):
         try:
             value = float(text)
         except ValueError:
             raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
-        if not (math.isfinite(value) and low < value and (value < high if high_open else value <= high)):
-            raise argparse.ArgumentTypeError(f"must be in ({low:g}, {high:g}{')' if high_open else ']'}; got {text}")
+        above = low < value if low_open else low <= value
+        below = value < high if high_open else value <= high
+        if not (math.isfinite(value) and above and below):
+            raise argparse.ArgumentTypeError(f"must be in {'(' if low_open else '['}{low:g}, {high:g}"
+                                             f"{')' if high_open else ']'}; got {text}")
         return value
 
     return parse

@@ -138,7 +138,7 @@ def _sampling_frequency(fs) -> float:
 
 def core_options(*, fs, block_rows, past_block_rows=None, orders, n_blocks=50, references=None,
                  uncertainty=True, demean=True, input_rcond=1e-10, threads=1, freeze_noise=True,
-                 noise_coupling_limit=5.0) -> "_core.IdentifyOptions":
+                 noise_coupling_limit=20.0) -> "_core.IdentifyOptions":
     """Check the settings of :func:`identify` and return them as the core's options struct."""
     o = _core.IdentifyOptions()
     o.fs = _sampling_frequency(fs)
@@ -263,6 +263,8 @@ class Modes:
             row += f"  {100 * self.damping_ratio[i]:>7.3f}"
             if unc:
                 row += f"  {100 * self.damping_std[i]:>7.3f}"
+                if self.noise_coupled is not None and self.noise_coupled[i]:
+                    row += "  noise-coupled: no first-order std"
             lines.append(row)
         return "\n".join(lines)
 
@@ -426,7 +428,7 @@ def _warn(result: Result, stacklevel: int = 3) -> None:
 def identify(y, u=None, *, fs: float, block_rows: int, past_block_rows: int | None = None,
              orders: int | Sequence[int], n_blocks: int = 50, references: Sequence[int] | None = None,
              uncertainty: bool = True, demean: bool = True, input_rcond: float = 1e-10,
-             threads: int = 1, freeze_noise: bool = True, noise_coupling_limit: float = 5.0) -> Result:
+             threads: int = 1, freeze_noise: bool = True, noise_coupling_limit: float = 20.0) -> Result:
     """Identify modes by covariance-driven SSI, with their standard deviations.
 
     Parameters
@@ -471,7 +473,7 @@ def identify(y, u=None, *, fs: float, block_rows: int, past_block_rows: int | No
         the standard deviations of physical poles by up to tens of times. False gives the
         plain first-order propagation.
     noise_coupling_limit : float
-        A pole whose sigma_f or sigma_xi shrinks by more than this factor (>= 1, default 5)
+        A pole whose sigma_f or sigma_xi shrinks by more than this factor (>= 1, default 20)
         when the noise directions are frozen is flagged ``Modes.noise_coupled``: it is
         spurious or mixed with a spurious pole, no first-order value is meaningful, and it
         keeps the unfrozen, conservative standard deviations.

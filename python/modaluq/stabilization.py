@@ -280,6 +280,8 @@ class Diagram:
     mac: np.ndarray                   #: (n_poles,) MAC with the matched pole
     frequency_change_std: np.ndarray  #: (n_poles,) |Δf| / sqrt(σ_f² + σ_f,prev²), dimensionless
     close_singular_values: np.ndarray  #: (n_poles,) bool, the pole's order cuts close singular values
+    #: (n_poles,) bool, no first-order σ: the pole depends on noise directions (docs/uq-math.md §5.5)
+    noise_coupled: np.ndarray
     orders: tuple                     #: identified orders, ascending
     fs: float                         #: sampling frequency, Hz
     output_names: tuple               #: one name per output channel
@@ -334,6 +336,7 @@ class Diagram:
             "mac": self.mac,
             "frequency_change_std": self.frequency_change_std,
             "close_singular_values": self.close_singular_values,
+            "noise_coupled": self.noise_coupled,
         }
         for k, name in enumerate(self.output_names):
             data[f"mode_shape_{name}"] = self.mode_shape[k]
@@ -369,6 +372,8 @@ class Diagram:
             "mac": (("pole",), self.mac, {"units": "1"}),
             "frequency_change_std": (("pole",), self.frequency_change_std, {"units": "1"}),
             "close_singular_values": (("pole",), self.close_singular_values.astype(np.int8), {}),
+            "noise_coupled": (("pole",), self.noise_coupled.astype(np.int8),
+                              {"long_name": "sigma not first-order meaningful: pole coupled to noise directions"}),
             "mode_shape_real": (("channel", "pole"), self.mode_shape.real, {}),
             "mode_shape_imag": (("channel", "pole"), self.mode_shape.imag, {}),
             "mode_shape_std_real": (("channel", "pole"), self.mode_shape_std_real, {}),
@@ -475,7 +480,7 @@ def stabilization_diagram(result, criteria: StabilityCriteria | None = None, *,
     c = criteria
     k_std = c.frequency_std_factor if has_std else None
 
-    cols = {k: [] for k in ("order", "f", "xi", "sf", "sxi", "close")}
+    cols = {k: [] for k in ("order", "f", "xi", "sf", "sxi", "close", "coupled")}
     shapes, shapes_sr, shapes_si = [], [], []
     for m in result.modes:
         n = m.n_modes
@@ -486,6 +491,8 @@ def stabilization_diagram(result, criteria: StabilityCriteria | None = None, *,
         cols["sf"].append(np.asarray(m.frequency_std, float) if m.has_uncertainty else nan)
         cols["sxi"].append(np.asarray(m.damping_std, float) if m.has_uncertainty else nan)
         cols["close"].append(np.full(n, bool(m.close_singular_values)))
+        coupled = getattr(m, "noise_coupled", None)
+        cols["coupled"].append(np.zeros(n, bool) if coupled is None else np.asarray(coupled, bool).reshape(n))
         shapes.append(np.asarray(m.mode_shape, complex).reshape(n_out, n))
         nan2 = np.full((n_out, n), np.nan)
         shapes_sr.append(np.asarray(m.mode_shape_std_real, float).reshape(n_out, n) if m.has_uncertainty else nan2)
@@ -496,6 +503,7 @@ def stabilization_diagram(result, criteria: StabilityCriteria | None = None, *,
     sf = np.concatenate(cols["sf"])
     sxi = np.concatenate(cols["sxi"])
     close = np.concatenate(cols["close"])
+    coupled = np.concatenate(cols["coupled"])
     shape = np.concatenate(shapes, axis=1)
     n_poles = f.size
 
@@ -562,7 +570,7 @@ def stabilization_diagram(result, criteria: StabilityCriteria | None = None, *,
         mode_shape_std_imag=np.concatenate(shapes_si, axis=1), status=status,
         reason=reason.astype(str) if n_poles else np.array([], dtype=str), matched_pole=matched,
         frequency_change=df, damping_change=dxi, mac=mac, frequency_change_std=dz,
-        close_singular_values=close, orders=orders, fs=float(result.fs), output_names=names,
+        close_singular_values=close, noise_coupled=coupled, orders=orders, fs=float(result.fs), output_names=names,
         criteria=c, has_uncertainty=has_std, result_settings=dict(result.settings),
     )
 
@@ -808,7 +816,8 @@ def select_modes(diagram: Diagram, settings: ClusteringSettings | None = None, *
     for k, members in enumerate(kept):
         mode_of_pole[members] = k
         med = np.median(f[members])
-        candidates = members[~diagram.close_singular_values[members]]
+        # the representative's σ is read from it: not at a cut inside a cluster, not noise-coupled
+        candidates = members[~(diagram.close_singular_values[members] | diagram.noise_coupled[members])]
         if candidates.size == 0:
             candidates = members
         # nearest to the median; ties -> higher order (candidates ascend in order, take last)

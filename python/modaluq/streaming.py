@@ -101,7 +101,7 @@ class CovarianceAccumulator:
         return self._acc.finish(_boolean("with_blocks", with_blocks))
 
     def identify(self, *, fs: float, orders, uncertainty: bool = True, input_rcond: float = 1e-10,
-                 threads: int = 1, freeze_noise: bool = True, noise_coupling_limit: float = 5.0) -> Result:
+                 threads: int = 1, freeze_noise: bool = True, noise_coupling_limit: float = 20.0) -> Result:
         """Identify from everything pushed so far (see :func:`modaluq.identify`)."""
         layout = self._acc.layout
         o = core_options(fs=fs, block_rows=layout.block_rows, past_block_rows=layout.past_block_rows or None,

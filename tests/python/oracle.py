@@ -516,7 +516,7 @@ def _orders_list(orders):
 
 
 def _identify(y, u, fs, p, q, orders, n_blocks, references, uncertainty, demean, path,
-              freeze_noise=True, noise_coupling_limit=5.0):
+              freeze_noise=True, noise_coupling_limit=20.0):
     q = p if q is None else int(q)
     p = int(p)
     orders = _orders_list(orders)
@@ -609,7 +609,7 @@ def _identify(y, u, fs, p, q, orders, n_blocks, references, uncertainty, demean,
 
 def identify(y, u=None, *, fs, block_rows, past_block_rows=None, orders, n_blocks=50,
              references=None, uncertainty=True, demean=True, freeze_noise=True,
-             noise_coupling_limit=5.0):
+             noise_coupling_limit=20.0):
     """SSI-cov identification with the **full explicit** delta-method path (§8).
 
     Sigma_R = T_R T_R^T; Sigma_H = J_{H,R} Sigma_R J_{H,R}^T; Sigma_Gamma =
@@ -631,7 +631,7 @@ def identify(y, u=None, *, fs, block_rows, past_block_rows=None, orders, n_block
 
 def identify_factor(y, u=None, *, fs, block_rows, past_block_rows=None, orders, n_blocks=50,
                     references=None, uncertainty=True, demean=True, freeze_noise=True,
-                    noise_coupling_limit=5.0):
+                    noise_coupling_limit=20.0):
     """Same as :func:`identify` but with the factor formulation (§8): U_theta =
     J_theta J_{AC,Gamma} J_{Gamma,H} J_{H,R} T_R, Sigma_theta = U_theta U_theta^T (std =
     row norms).  Each order's dict also has 'factor' (nm x d x n_blocks).  A second check

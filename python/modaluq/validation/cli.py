@@ -4,7 +4,9 @@ Registered by :func:`register` from ``modaluq.cli``.  Prints the Markdown report
 the progress bar on stderr and, with ``--out DIR``, writes ``report.md``, ``results.csv``
 (one row per record, method and mode), ``summary.csv`` (one row per method and mode),
 ``results.npz`` (everything, readable with ``MonteCarloResult.load``) and the histograms
-``histograms_std.png`` and ``histograms_estimates.png``.
+``histograms_std.png`` and ``histograms_estimates.png``.  With several ``--order`` values, all
+orders are identified from the same records; the report holds one section per order and the
+other files carry the order in their name (``results_n24.csv``, ...).
 """
 
 from __future__ import annotations
@@ -19,33 +21,50 @@ OUTPUT_FILES = ("report.md", "results.csv", "summary.csv", "results.npz", "histo
                 "histograms_estimates.png")
 
 
+def _file_names(orders) -> list:
+    """OUTPUT_FILES, with the order in every name but report.md when there are several."""
+    if len(orders) == 1:
+        return list(OUTPUT_FILES)
+    names = ["report.md"]
+    for n in orders:
+        names += [name.replace(".", f"_n{n}.", 1) for name in OUTPUT_FILES[1:]]
+    return names
+
+
 def _validate(args) -> int:
     from ..cli import check_output_paths
     from .montecarlo import monte_carlo
 
+    orders = sorted(set(args.order))
+    names = _file_names(orders)
     out = None
     if args.out is not None:
         out = Path(args.out)
         if out.exists() and not out.is_dir():
             raise ValueError(f"--out must be a directory; {out} is a file")
         # before the run, not after it
-        check_output_paths([("--out", out / name) for name in OUTPUT_FILES], overwrite=args.overwrite)
-    result = monte_carlo(args.records, n_samples=args.samples, order=args.order, block_rows=args.block_rows,
-                         past_block_rows=args.past_block_rows, n_blocks=args.n_blocks, seed=args.seed,
-                         processes=args.processes, progress=not args.no_progress,
-                         match_tolerance=args.tolerance)
-    text = result.report()
+        check_output_paths([("--out", out / name) for name in names], overwrite=args.overwrite)
+    results = monte_carlo(args.records, n_samples=args.samples, order=orders, block_rows=args.block_rows,
+                          past_block_rows=args.past_block_rows, n_blocks=args.n_blocks, seed=args.seed,
+                          processes=args.processes, progress=not args.no_progress,
+                          match_tolerance=args.tolerance, unknown_input_std=args.unknown_input_std,
+                          damping_ratio=args.damping_ratio, n_dof=args.n_dof, input_dofs=args.input_dofs,
+                          output_dofs=args.output_dofs, freeze_noise=not args.no_freeze_noise,
+                          noise_coupling_limit=args.noise_coupling_limit)
+    text = "\n".join(r.report() for r in results)
     if out is not None:
         out.mkdir(parents=True, exist_ok=True)
         (out / "report.md").write_text(text, encoding="utf-8")
-        result.write_csv(out / "results.csv")
-        result.write_csv(out / "summary.csv", summary=True)
-        result.save(out / "results.npz")
-        result.plot_histograms(out / "histograms_std.png")
-        result.plot_estimates(out / "histograms_estimates.png")
+        for n, r in zip(orders, results):
+            tag = "" if len(orders) == 1 else f"_n{n}"
+            r.write_csv(out / f"results{tag}.csv")
+            r.write_csv(out / f"summary{tag}.csv", summary=True)
+            r.save(out / f"results{tag}.npz")
+            r.plot_histograms(out / f"histograms_std{tag}.png")
+            r.plot_estimates(out / f"histograms_estimates{tag}.png")
     sys.stdout.write(text)
     if out is not None:
-        print(f"\nwrote {', '.join(OUTPUT_FILES)} to {out}", file=sys.stderr)
+        print(f"\nwrote {', '.join(names)} to {out}", file=sys.stderr)
     return 0
 
 
@@ -71,10 +90,26 @@ def register(subparsers) -> None:
                    help="number of records (default 200; the paper used 10000)")
     v.add_argument("--samples", type=integer_option(1), default=10_000,
                    help="samples per record (default 10000, as the paper)")
-    v.add_argument("--order", type=integer_option(1), default=12, help="model order (default 12)")
+    v.add_argument("--order", type=integer_option(1), nargs="+", default=[12], metavar="N",
+                   help="model order(s), e.g. --order 12 24 36: every order from the same records (default 12)")
     v.add_argument("--block-rows", type=integer_option(2), default=15, help="future block rows p (default 15)")
     v.add_argument("--past-block-rows", type=integer_option(1), default=None, help="past block rows q (default: p)")
     v.add_argument("--n-blocks", type=integer_option(2), default=50, help="blocks for the uncertainty (default 50)")
+    v.add_argument("--unknown-input-std", type=real_option(0, low_open=False), default=0.1,
+                   help="std of the unmeasured forces relative to the known input; 0: the known input is the "
+                        "only excitation (default 0.1, the paper's)")
+    v.add_argument("--damping-ratio", type=real_option(0, 1, high_open=True), default=0.02,
+                   help="modal damping ratio of every mode, a fraction (default 0.02)")
+    v.add_argument("--n-dof", type=integer_option(1), default=6,
+                   help="masses of the simulated chain (shear frame) (default 6, the paper's)")
+    v.add_argument("--input-dofs", type=integer_option(0), nargs="+", default=[0], metavar="DOF",
+                   help="0-based DOFs of the known input forces (default 0)")
+    v.add_argument("--output-dofs", type=integer_option(0), nargs="+", default=None, metavar="DOF",
+                   help="0-based DOFs measured (default: 0 1 4 for 6 DOFs, else spread evenly)")
+    v.add_argument("--noise-coupling-limit", type=real_option(1, low_open=False), default=20.0,
+                   help="flag poles whose sigma the noise directions inflate more than this (default 20)")
+    v.add_argument("--no-freeze-noise", action="store_true",
+                   help="plain first-order propagation, noise singular vectors free (for comparison)")
     v.add_argument("--seed", type=integer_option(0), default=0,
                    help="seed of the run; record k uses SeedSequence(seed, spawn_key=(k,)) (default 0)")
     v.add_argument("--processes", type=integer_option(1, MAX_THREADS), default=None,

@@ -173,15 +173,18 @@ class _Config:
     """Everything a worker needs to process a record (picklable)."""
 
     n_samples: int
-    order: int
+    orders: tuple
     block_rows: int
     past_block_rows: int | None
     n_blocks: int
     seed: int
     match_tolerance: float
+    simulation: dict = field(default_factory=dict)  # keywords of modaluq.simulate
+    freeze_noise: bool = True
+    noise_coupling_limit: float = 20.0
 
 
-def _empty_arrays(n_records: int, n_modes: int) -> dict:
+def _empty_arrays(n_records: int, n_modes: int, n_outputs: int) -> dict:
     shape = (len(METHODS), n_records, n_modes)
     return {
         "frequency_hz": np.full(shape, np.nan),
@@ -192,44 +195,58 @@ def _empty_arrays(n_records: int, n_modes: int) -> dict:
         "failed": np.zeros(shape[:2], dtype=bool),
         "close_singular_values": np.zeros(shape[:2], dtype=bool),
         "n_warnings": np.zeros(shape[:2], dtype=np.int64),
+        "noise_coupled": np.zeros(shape, dtype=bool),
+        "mode_shape": np.full(shape + (n_outputs,), np.nan, dtype=np.complex128),
+        "mode_shape_std_real": np.full(shape + (n_outputs,), np.nan),
+        "mode_shape_std_imag": np.full(shape + (n_outputs,), np.nan),
+        "reference_component": np.full(shape, -1, dtype=np.int64),
     }
 
 
 def _run_chunk(indices, cfg: _Config):
-    """Simulate and identify the records ``indices``; return them as arrays (record axis = 1).
+    """Simulate and identify the records ``indices`` at every order of ``cfg.orders``.
 
-    Returns ``(indices, arrays, truth)``, ``truth`` the simulation's true ``frequency_hz``,
-    ``damping_ratio`` and ``fs``.
+    Returns ``(indices, {order: arrays}, truth)`` (record axis = 1 of every array), ``truth``
+    the simulation's true ``frequency_hz``, ``damping_ratio``, ``fs`` and ``n_outputs``.
     """
     indices = [int(k) for k in indices]
     arrays = truth = None
     for j, k in enumerate(indices):
-        sim = simulate(cfg.n_samples, seed=record_seed(cfg.seed, k))
+        sim = simulate(cfg.n_samples, seed=record_seed(cfg.seed, k), **cfg.simulation)
         if arrays is None:
-            truth = {"frequency_hz": sim.frequency_hz, "damping_ratio": sim.damping_ratio, "fs": sim.fs}
-            arrays = _empty_arrays(len(indices), sim.frequency_hz.size)
+            truth = {"frequency_hz": sim.frequency_hz, "damping_ratio": sim.damping_ratio, "fs": sim.fs,
+                     "n_outputs": sim.n_outputs}
+            arrays = {n: _empty_arrays(len(indices), sim.frequency_hz.size, sim.n_outputs) for n in cfg.orders}
         true_f = truth["frequency_hz"]
         for m, u in enumerate((None, sim.u)):
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", ModalUQWarning)
                 try:
                     result = identify(sim.y, u, fs=sim.fs, block_rows=cfg.block_rows,
-                                      past_block_rows=cfg.past_block_rows, orders=cfg.order,
-                                      n_blocks=cfg.n_blocks)
+                                      past_block_rows=cfg.past_block_rows, orders=list(cfg.orders),
+                                      n_blocks=cfg.n_blocks, freeze_noise=cfg.freeze_noise,
+                                      noise_coupling_limit=cfg.noise_coupling_limit)
                 except NumericalError:
-                    arrays["failed"][m, j] = True
+                    for a in arrays.values():
+                        a["failed"][m, j] = True
                     continue
-            modes = result.at_order(cfg.order)
-            arrays["n_identified"][m, j] = modes.n_modes
-            arrays["close_singular_values"][m, j] = modes.close_singular_values
-            arrays["n_warnings"][m, j] = len(result.warnings)
-            idx = match_modes(modes.frequency_hz, true_f, cfg.match_tolerance)
-            hit = idx >= 0
-            arrays["frequency_hz"][m, j, hit] = modes.frequency_hz[idx[hit]]
-            arrays["damping_ratio"][m, j, hit] = modes.damping_ratio[idx[hit]]
-            if modes.has_uncertainty:
-                arrays["frequency_std"][m, j, hit] = modes.frequency_std[idx[hit]]
-                arrays["damping_std"][m, j, hit] = modes.damping_std[idx[hit]]
+            for n, a in arrays.items():
+                modes = result.at_order(n)
+                a["n_identified"][m, j] = modes.n_modes
+                a["close_singular_values"][m, j] = modes.close_singular_values
+                a["n_warnings"][m, j] = len(result.warnings)
+                idx = match_modes(modes.frequency_hz, true_f, cfg.match_tolerance)
+                hit = idx >= 0
+                a["frequency_hz"][m, j, hit] = modes.frequency_hz[idx[hit]]
+                a["damping_ratio"][m, j, hit] = modes.damping_ratio[idx[hit]]
+                a["mode_shape"][m, j, hit] = modes.mode_shape[:, idx[hit]].T
+                a["reference_component"][m, j, hit] = modes.reference_component[idx[hit]]
+                if modes.has_uncertainty:
+                    a["frequency_std"][m, j, hit] = modes.frequency_std[idx[hit]]
+                    a["damping_std"][m, j, hit] = modes.damping_std[idx[hit]]
+                    a["noise_coupled"][m, j, hit] = modes.noise_coupled[idx[hit]]
+                    a["mode_shape_std_real"][m, j, hit] = modes.mode_shape_std_real[:, idx[hit]].T
+                    a["mode_shape_std_imag"][m, j, hit] = modes.mode_shape_std_imag[:, idx[hit]].T
     return indices, arrays, truth
 
 
@@ -240,7 +257,8 @@ def _summary(values, stds, rng, n_bootstrap):
     """Per-mode statistics of one parameter of one method (values, stds: (n_records, n_modes))."""
     n_modes = values.shape[1]
     out = {k: np.full(n_modes, np.nan) for k in
-           ("mean", "mean_se", "std_mc", "std_est", "std_est_spread", "std_est_median", "ratio", "ratio_se")}
+           ("mean", "mean_se", "std_mc", "std_est", "std_est_spread", "std_est_median", "ratio", "ratio_se",
+            "ratio_median")}
     out["n"] = np.zeros(n_modes, dtype=np.int64)
     for i in range(n_modes):
         ok = np.isfinite(values[:, i]) & np.isfinite(stds[:, i])
@@ -257,6 +275,7 @@ def _summary(values, stds, rng, n_bootstrap):
         out["std_est_spread"][i] = float(np.std(s, ddof=1))
         out["std_est_median"][i] = float(np.median(s))
         out["ratio"][i] = out["std_est"][i] / sd if sd > 0 else np.nan
+        out["ratio_median"][i] = out["std_est_median"][i] / sd if sd > 0 else np.nan
         if n_bootstrap >= 2 and sd > 0:
             # Records are the independent unit: resample them (estimate and its std together).
             ratios = np.empty(n_bootstrap)
@@ -275,7 +294,35 @@ def _summary(values, stds, rng, n_bootstrap):
 
 _ARRAY_FIELDS = ("true_frequency_hz", "true_damping_ratio", "frequency_hz", "damping_ratio",
                  "frequency_std", "damping_std", "n_identified", "failed", "close_singular_values",
-                 "n_warnings")
+                 "n_warnings", "noise_coupled", "mode_shape", "mode_shape_std_real", "mode_shape_std_imag",
+                 "reference_component")
+
+
+def _shape_ratio(shape, std_re, std_im, ref, use):
+    """Per mode, the median over the non-reference shape components (real and imaginary parts)
+    of median(analytic std) / sample std, over the records in ``use`` whose reference
+    component is the mode's most frequent one (so that all are normalised alike)."""
+    n_modes = shape.shape[1]
+    out = np.full(n_modes, np.nan)
+    for i in range(n_modes):
+        ok = use[:, i] & (ref[:, i] >= 0)
+        if ok.sum() < 3:
+            continue
+        k = np.bincount(ref[ok, i]).argmax()
+        ok &= ref[:, i] == k
+        if ok.sum() < 3:
+            continue
+        ratios = []
+        for c in range(shape.shape[2]):
+            if c == k:
+                continue
+            for part, std in ((shape[ok, i, c].real, std_re[ok, i, c]), (shape[ok, i, c].imag, std_im[ok, i, c])):
+                sd = np.std(part, ddof=1)
+                if sd > 0:
+                    ratios.append(np.median(std) / sd)
+        if ratios:
+            out[i] = float(np.median(ratios))
+    return out
 
 
 @dataclass(frozen=True, repr=False, eq=False)
@@ -308,6 +355,11 @@ class MonteCarloResult:
     close_singular_values: np.ndarray    #: (2, n_records) order cuts close singular values
     n_warnings: np.ndarray               #: (2, n_records) entries in Result.warnings
     settings: dict                       #: the run's settings
+    noise_coupled: np.ndarray | None = None        #: (2, n_records, n_modes) the pole's flag (uq-math §5.5)
+    mode_shape: np.ndarray | None = None           #: (2, n_records, n_modes, n_outputs) normalised shapes
+    mode_shape_std_real: np.ndarray | None = None  #: (2, n_records, n_modes, n_outputs)
+    mode_shape_std_imag: np.ndarray | None = None  #: (2, n_records, n_modes, n_outputs)
+    reference_component: np.ndarray | None = None  #: (2, n_records, n_modes) component scaled to 1, -1 = missed
     elapsed_s: float = float("nan")      #: wall time of the run, s
     processes: int = 1                   #: worker processes used
     machine: str = ""                    #: platform and CPU count of the run
@@ -331,6 +383,22 @@ class MonteCarloResult:
     damping_std_est_median: np.ndarray = field(init=False)
     damping_std_ratio: np.ndarray = field(init=False)
     damping_std_ratio_se: np.ndarray = field(init=False)
+    frequency_std_ratio_median: np.ndarray = field(init=False)  #: median analytic std / σ_MC
+    damping_std_ratio_median: np.ndarray = field(init=False)
+    #: (2, n_modes) share of the matched records where the pole is flagged noise_coupled
+    noise_coupled_share: np.ndarray = field(init=False)
+    #: (2, n_modes) mean and median ratios over the records where the pole is not flagged
+    #: (σ_MC from those records too): what a user who drops flagged poles gets
+    frequency_std_ratio_unflagged: np.ndarray = field(init=False)
+    frequency_std_ratio_median_unflagged: np.ndarray = field(init=False)
+    damping_std_ratio_unflagged: np.ndarray = field(init=False)
+    damping_std_ratio_median_unflagged: np.ndarray = field(init=False)
+    #: (2, n_modes) median over the shape components of median(std) / σ_MC, unflagged records
+    mode_shape_std_ratio_median: np.ndarray = field(init=False)
+    #: (2, n_modes) RMS over the unflagged records of (estimate - mean) / the record's own σ: 1
+    #: when every record's σ is its scatter, even when σ differs from record to record
+    frequency_rms_z_unflagged: np.ndarray = field(init=False)
+    damping_rms_z_unflagged: np.ndarray = field(init=False)
 
     def __post_init__(self):
         rng = np.random.default_rng(np.random.SeedSequence([int(self.settings.get("seed", 0)), 1]))
@@ -355,6 +423,31 @@ class MonteCarloResult:
             set_(self, f"{name}_std_ratio_se", stats[(name, "ratio_se")])
         if n_modes and not np.array_equal(stats[("frequency", "n")], stats[("damping", "n")]):
             raise ValueError("frequency and damping arrays must be missing in the same places")
+        for name in ("frequency", "damping"):
+            set_(self, f"{name}_std_ratio_median", stats[(name, "ratio_median")])
+        shape = self.frequency_hz.shape
+        coupled = np.zeros(shape, dtype=bool) if self.noise_coupled is None else np.asarray(self.noise_coupled)
+        set_(self, "noise_coupled", coupled)
+        matched = np.isfinite(self.frequency_hz)
+        with np.errstate(invalid="ignore"):
+            set_(self, "noise_coupled_share", (coupled & matched).sum(axis=1) / matched.sum(axis=1))
+        for name, values, stds in (("frequency", self.frequency_hz, self.frequency_std),
+                                   ("damping", self.damping_ratio, self.damping_std)):
+            clean = [_summary(np.where(coupled[m], np.nan, values[m]), stds[m], rng, 0) for m in range(n_methods)]
+            set_(self, f"{name}_std_ratio_unflagged", np.stack([c["ratio"] for c in clean]))
+            set_(self, f"{name}_std_ratio_median_unflagged", np.stack([c["ratio_median"] for c in clean]))
+            with np.errstate(invalid="ignore", divide="ignore"):
+                v = np.where(coupled, np.nan, values)
+                z = (v - np.nanmean(v, axis=1, keepdims=True)) / stds if v.shape[1] else v
+                ok = np.isfinite(z)
+                rms = np.sqrt(np.where(ok, z * z, 0).sum(axis=1) / ok.sum(axis=1))
+            set_(self, f"{name}_rms_z_unflagged", np.where(ok.sum(axis=1) >= 2, rms, np.nan))
+        if self.mode_shape is not None and self.mode_shape_std_real is not None:
+            set_(self, "mode_shape_std_ratio_median", np.stack([
+                _shape_ratio(self.mode_shape[m], self.mode_shape_std_real[m], self.mode_shape_std_imag[m],
+                             self.reference_component[m], matched[m] & ~coupled[m]) for m in range(n_methods)]))
+        else:
+            set_(self, "mode_shape_std_ratio_median", np.full((n_methods, n_modes), np.nan))
 
     # ---- shape
 
@@ -454,7 +547,8 @@ class MonteCarloResult:
         """Read a run written by :meth:`save` (the summary is recomputed, identically)."""
         with np.load(path, allow_pickle=False) as data:
             meta = json.loads(str(data["meta"]))
-            arrays = {name: data[name] for name in _ARRAY_FIELDS}
+            # runs saved before a field existed load with it absent
+            arrays = {name: data[name] if name in data.files else None for name in _ARRAY_FIELDS}
         if tuple(meta.get("methods", METHODS)) != METHODS:
             raise ValueError(f"{path}: methods {meta.get('methods')} differ from {METHODS}")
         return cls(**arrays, settings=meta["settings"], elapsed_s=float(meta["elapsed_s"]),
@@ -505,11 +599,13 @@ def _csv_cell(x):
 # --------------------------------------------------------------------------- the run
 
 
-def monte_carlo(n_records: int = 200, *, n_samples: int = 10_000, order: int = 12, block_rows: int = 15,
+def monte_carlo(n_records: int = 200, *, n_samples: int = 10_000, order=12, block_rows: int = 15,
                 past_block_rows: int | None = None, n_blocks: int = 50, seed: int = 0,
                 processes: int | None = None, progress: bool = True, match_tolerance: float = 0.05,
                 n_bootstrap: int = _DEFAULT_BOOTSTRAP, chunk_size: int | None = None,
-                mp_context: str = "spawn") -> MonteCarloResult:
+                mp_context: str = "spawn", unknown_input_std: float = 0.1, damping_ratio: float = 0.02,
+                n_dof: int = 6, input_dofs=(0,), output_dofs=None, freeze_noise: bool = True,
+                noise_coupling_limit: float = 20.0):
     """Monte Carlo study of the analytic standard deviations (the paper's §5.1).
 
     Simulates ``n_records`` independent records of the paper's 6-DOF chain
@@ -524,8 +620,9 @@ def monte_carlo(n_records: int = 200, *, n_samples: int = 10_000, order: int = 1
         Number of independent records (>= 1; the summary needs >= 2 matched records per mode).
     n_samples : int, default 10_000
         Samples per record (the paper's N = 10,000).
-    order : int, default 12
-        Model order (12 = six modes, as in the paper).
+    order : int or sequence of int, default 12
+        Model order (12 = six modes, as in the paper).  Several orders are identified from
+        the same records (one SVD per record); a sequence returns one result per order.
     block_rows : int, default 15
         Future block rows p.
     past_block_rows : int, optional
@@ -552,12 +649,24 @@ def monte_carlo(n_records: int = 200, *, n_samples: int = 10_000, order: int = 1
         the workers start with ``OPENBLAS_NUM_THREADS``, ``OMP_NUM_THREADS`` and the like set
         to 1: a multi-threaded BLAS in every worker makes the run several times slower.  With
         "fork" the workers inherit this process's BLAS threads.
+    unknown_input_std : float, default 0.1
+        Std of the unmeasured forces relative to the known input (:func:`modaluq.simulate`);
+        0 makes the known input the only excitation (a shaker test).
+    damping_ratio : float, default 0.02
+        Modal damping ratio of every mode (fraction).
+    n_dof, input_dofs, output_dofs
+        The structure (:func:`modaluq.simulate`): the paper's 6-DOF chain by default; e.g.
+        ``n_dof=4, input_dofs=(0, 3)`` is a 4-storey shear frame with two known inputs.
+    freeze_noise, noise_coupling_limit
+        Passed to :func:`modaluq.identify` (``freeze_noise=False``: the plain first-order
+        propagation, for comparison).
 
     Returns
     -------
-    MonteCarloResult
+    MonteCarloResult or tuple of MonteCarloResult
         Per-record arrays and the per-mode summary; ``.report()``, ``.to_dataframe()``,
-        ``.plot_histograms(path)``.
+        ``.plot_histograms(path)``.  A tuple (one per order, ascending) when ``order`` is a
+        sequence.
 
     Raises
     ------
@@ -585,7 +694,17 @@ def monte_carlo(n_records: int = 200, *, n_samples: int = 10_000, order: int = 1
     """
     n_records = _integer("n_records", n_records, minimum=1)
     n_samples = _integer("n_samples", n_samples, minimum=1)
-    order = _integer("order", order, minimum=1)
+    single = np.ndim(order) == 0
+    orders = tuple(sorted({_integer("order", n, minimum=1) for n in ([order] if single else order)}))
+    if not orders:
+        raise ValueError("order must name at least one model order")
+    unknown_input_std = _real("unknown_input_std", unknown_input_std, low=0)
+    damping_ratio = _real("damping_ratio", damping_ratio, low=0, high=1, low_open=True, high_open=True)
+    simulation = {"unknown_input_std": unknown_input_std, "damping_ratio": damping_ratio,
+                  "n_dof": _integer("n_dof", n_dof, minimum=1),
+                  "input_dofs": tuple(_integer("input_dofs", d, minimum=0) for d in input_dofs)}
+    if output_dofs is not None:
+        simulation["output_dofs"] = tuple(_integer("output_dofs", d, minimum=0) for d in output_dofs)
     block_rows = _integer("block_rows", block_rows, minimum=2)
     if past_block_rows is not None:
         past_block_rows = _integer("past_block_rows", past_block_rows, minimum=1)
@@ -602,8 +721,10 @@ def monte_carlo(n_records: int = 200, *, n_samples: int = 10_000, order: int = 1
         raise ValueError(f"mp_context must be one of {multiprocessing.get_all_start_methods()}; "
                          f"got {mp_context!r}")
 
-    cfg = _Config(n_samples=n_samples, order=order, block_rows=block_rows, past_block_rows=past_block_rows,
-                  n_blocks=n_blocks, seed=seed, match_tolerance=match_tolerance)
+    cfg = _Config(n_samples=n_samples, orders=orders, block_rows=block_rows, past_block_rows=past_block_rows,
+                  n_blocks=n_blocks, seed=seed, match_tolerance=match_tolerance, simulation=simulation,
+                  freeze_noise=_boolean("freeze_noise", freeze_noise),
+                  noise_coupling_limit=_real("noise_coupling_limit", noise_coupling_limit, low=1))
     processes = min(processes, n_records)
     if chunk_size is None:
         chunk_size = max(1, min(_MAX_CHUNK, math.ceil(n_records / (4 * processes))))
@@ -616,7 +737,7 @@ def monte_carlo(n_records: int = 200, *, n_samples: int = 10_000, order: int = 1
     with _in_process_blas_limit():
         first = _run_chunk([0], cfg)
     truth = first[2]
-    arrays = _empty_arrays(n_records, truth["frequency_hz"].size)
+    arrays = {n: _empty_arrays(n_records, truth["frequency_hz"].size, truth["n_outputs"]) for n in orders}
     _store(arrays, first)
     rest = list(range(1, n_records))
     chunks = [rest[i:i + chunk_size] for i in range(0, len(rest), chunk_size)]
@@ -646,18 +767,29 @@ def monte_carlo(n_records: int = 200, *, n_samples: int = 10_000, order: int = 1
                     raise
     elapsed = time.perf_counter() - t0
 
-    settings = {"n_records": n_records, "n_samples": n_samples, "fs": float(truth["fs"]), "order": order,
-                "block_rows": block_rows, "past_block_rows": past_block_rows or block_rows,
-                "n_blocks": n_blocks, "seed": seed, "match_tolerance": match_tolerance,
-                "simulation": "modaluq.simulate defaults (paper §5.1 chain)"}
+    paper_case = simulation == {"unknown_input_std": 0.1, "damping_ratio": 0.02, "n_dof": 6, "input_dofs": (0,)}
+    described = "modaluq.simulate defaults (paper §5.1 chain)" if paper_case else \
+        "modaluq.simulate(" + ", ".join(f"{k}={v!r}" for k, v in simulation.items()) + ")"
     machine = f"{platform.system()} {platform.machine()}, {_available_cpus()} CPU(s) available, " \
               f"Python {platform.python_version()}"
-    return MonteCarloResult(true_frequency_hz=truth["frequency_hz"], true_damping_ratio=truth["damping_ratio"],
-                            **arrays, settings=settings,
-                            elapsed_s=elapsed, processes=processes, machine=machine, n_bootstrap=n_bootstrap)
+    results = tuple(
+        MonteCarloResult(true_frequency_hz=truth["frequency_hz"], true_damping_ratio=truth["damping_ratio"],
+                         **arrays[n],
+                         settings={"n_records": n_records, "n_samples": n_samples, "fs": float(truth["fs"]),
+                                   "order": n, "block_rows": block_rows,
+                                   "past_block_rows": past_block_rows or block_rows, "n_blocks": n_blocks,
+                                   "seed": seed, "match_tolerance": match_tolerance, "simulation": described,
+                                   "simulate_keywords": {k: list(v) if isinstance(v, tuple) else v
+                                                         for k, v in simulation.items()},
+                                   "paper_case": paper_case, "freeze_noise": cfg.freeze_noise,
+                                   "noise_coupling_limit": cfg.noise_coupling_limit},
+                         elapsed_s=elapsed, processes=processes, machine=machine, n_bootstrap=n_bootstrap)
+        for n in orders)
+    return results[0] if single else results
 
 
 def _store(arrays: dict, chunk_output) -> None:
     indices, part, _ = chunk_output
-    for name, target in arrays.items():
-        target[:, indices] = part[name]
+    for n, by_name in arrays.items():
+        for name, target in by_name.items():
+            target[:, indices] = part[n][name]
