@@ -43,7 +43,7 @@ struct IdentifyOptions {
     double noise_floor_factor = 1.5;    ///< c of (5.12), > 0
     /// rho_max of (5.14), >= 1: poles whose sigma_f or sigma_xi the noise directions inflate by
     /// more are flagged noise_coupled and keep the unfrozen sigma.
-    double noise_coupling_limit = 5.0;
+    double noise_coupling_limit = 20.0;
 
     void validate() const {
         detail::require(std::isfinite(fs) && fs > 0.0, "fs must be a finite sampling frequency > 0 Hz, got ", fs);

@@ -390,7 +390,7 @@ struct NoiseOptions {
     double floor_factor = 1.5;    ///< c of (5.12): k* is the first k with s_k < c delta_k
     /// rho_max of (5.14): a pole whose sigma_f or sigma_xi shrinks by more than this factor when
     /// the noise directions are frozen is noise-coupled; it keeps the unfrozen (larger) sigma.
-    double coupling_limit = 5.0;
+    double coupling_limit = 20.0;
 };
 
 /// Sensitivities computed once at the largest order and reused by every order.
