@@ -19,6 +19,7 @@
 
 #include <cmath>
 #include <complex>
+#include <functional>
 #include <limits>
 #include <vector>
 
@@ -305,16 +306,19 @@ inline void eigen_perturbation(const OrderContext& ctx, const Eigen::Ref<const E
 ///   d(C phi_i) = G_i Z_i + Q4 phi_i   with G_i = C V diag(1 / (lambda_i - lambda_j))_{j != k_i} M,
 /// where Z_i (n x nb) gathers column i of every block's Z. With BlockQ's layout, column i of
 /// the stacked product read as an n_b x n matrix is Z_i^T: no gathering copy.
+/// `with_shape(i)`, called once every d lambda is known, selects the modes whose d(C phi) is
+/// formed (all when empty); the others get an empty dshape (the unfrozen pass of §5.5 needs the
+/// shapes of flagged poles only).
 inline void eigen_perturbation_blocks(const OrderContext& ctx, const BlockQ& q, Eigen::MatrixXcd& dlambda,
-                                      std::vector<Eigen::MatrixXcd>& dshape) {
+                                      std::vector<Eigen::MatrixXcd>& dshape,
+                                      const std::function<bool(Index)>& with_shape = {}) {
+    const Eigen::Index n = ctx.phi.rows(), nm = ctx.phi.cols(), l = q.l, nb = q.nb;
     const Eigenstructure& e = *ctx.eig;
-    const Index n = ctx.phi.rows(), nm = ctx.phi.cols(), l = q.l, nb = q.nb;
     Eigen::MatrixXd ph(n, 2 * nm);
     ph << ctx.phi.real(), ctx.phi.imag();
-    Eigen::MatrixXd za(nb * n, 2 * nm), zb(nb * n, 2 * nm), z4(nb * l, 2 * nm);
+    Eigen::MatrixXd za(nb * n, 2 * nm), zb(nb * n, 2 * nm);
     gemm(za, q.qa.topLeftCorner(nb * n, n), Op::N, ph, Op::N);
     gemm(zb, q.qb.topLeftCorner(nb * n, n), Op::N, ph, Op::N);
-    gemm(z4, q.q4.leftCols(n), Op::N, ph, Op::N);
 
     // M^T = W chi-bar = R^{-1} R^{-T} (chi^H)^T.
     Eigen::MatrixXcd mt = e.left_h.transpose();
@@ -322,39 +326,66 @@ inline void eigen_perturbation_blocks(const OrderContext& ctx, const BlockQ& q, 
     ctx.rn.triangularView<Eigen::Upper>().solveInPlace(mt);
     const Eigen::MatrixXcd M = mt.transpose();
 
-    // G_i for every mode in one complex GEMM: rows i l .. i l + l - 1 of
+    using Cols = Eigen::Map<const Eigen::MatrixXd>;
+    Eigen::MatrixXcd zt(nb, n);
+    const auto z_transposed = [&](Index i) {  // Z_i^T = (a_re + i a_im) - lambda (b_re + i b_im)
+        const cd lam = ctx.lambda(i);
+        const Cols a_re(za.col(i).data(), nb, n), a_im(za.col(nm + i).data(), nb, n);
+        const Cols b_re(zb.col(i).data(), nb, n), b_im(zb.col(nm + i).data(), nb, n);
+        zt.real() = a_re - lam.real() * b_re + lam.imag() * b_im;
+        zt.imag() = a_im - lam.real() * b_im - lam.imag() * b_re;
+    };
+    dlambda.resize(nm, nb);
+    for (Index i = 0; i < nm; ++i) {
+        z_transposed(i);
+        dlambda.row(i).noalias() = M.row(e.kept[i]) * zt.transpose();
+        dlambda.row(i) /= ctx.den(i);
+    }
+
+    std::vector<Index> wanted;
+    for (Index i = 0; i < nm; ++i)
+        if (!with_shape || with_shape(i)) wanted.push_back(i);
+    dshape.assign(nm, Eigen::MatrixXcd());
+    if (wanted.empty()) return;
+    const Index nw = static_cast<Index>(wanted.size());
+    Eigen::MatrixXd z4(nb * l, 2 * nm);
+    gemm(z4, q.q4.leftCols(n), Op::N, ph, Op::N);
+    // G_i for every wanted mode in one complex GEMM: rows w l .. w l + l - 1 of
     // [C V diag(c_1); C V diag(c_2); ...] M (l-row products one by one run at a fraction of
     // the rate when l is small).
-    Eigen::MatrixXcd cvc(nm * l, n);
-    for (Index i = 0; i < nm; ++i) {
-        const Index ki = e.kept[i];
+    Eigen::MatrixXcd cvc(nw * l, n);
+    for (Index w = 0; w < nw; ++w) {
+        const Index i = wanted[w], ki = e.kept[i];
         for (Index j = 0; j < n; ++j) {
-            auto col = cvc.block(i * l, j, l, 1);
+            auto col = cvc.block(w * l, j, l, 1);
             if (j == ki) col.setZero();
             else col = ctx.cv.col(j) * (cd(1.0) / (ctx.lambda(i) - e.values(j)));
         }
     }
-    Eigen::MatrixXcd g_all(nm * l, n);
+    Eigen::MatrixXcd g_all(nw * l, n);
     gemm(g_all, cvc, Op::N, M, Op::N);
-
-    using Cols = Eigen::Map<const Eigen::MatrixXd>;
-    dlambda.resize(nm, nb);
-    dshape.assign(nm, Eigen::MatrixXcd(l, nb));
-    Eigen::MatrixXcd zt(nb, n);
-    for (Index i = 0; i < nm; ++i) {
-        const cd lam = ctx.lambda(i);
-        const Cols a_re(za.col(i).data(), nb, n), a_im(za.col(nm + i).data(), nb, n);
-        const Cols b_re(zb.col(i).data(), nb, n), b_im(zb.col(nm + i).data(), nb, n);
-        // Z_i^T = (a_re + i a_im) - lambda (b_re + i b_im)
-        zt.real() = a_re - lam.real() * b_re + lam.imag() * b_im;
-        zt.imag() = a_im - lam.real() * b_im - lam.imag() * b_re;
-        const Index ki = e.kept[i];
-        dlambda.row(i).noalias() = M.row(ki) * zt.transpose();
-        dlambda.row(i) /= ctx.den(i);
+    for (Index w = 0; w < nw; ++w) {
+        const Index i = wanted[w];
+        z_transposed(i);
+        dshape[i].resize(l, nb);
         dshape[i].real() = Cols(z4.col(i).data(), nb, l).transpose();
         dshape[i].imag() = Cols(z4.col(nm + i).data(), nb, l).transpose();
-        gemm(dshape[i], g_all.middleRows(i * l, l), Op::N, zt, Op::T, 1.0, 1.0);
+        gemm(dshape[i], g_all.middleRows(w * l, l), Op::N, zt, Op::T, 1.0, 1.0);
     }
+}
+
+/// Rows [f, xi] of stage 5 (uq-math §7) from d lambda (1 x nb): d mu = fs d lambda / lambda,
+/// df = Re(conj(mu) d mu) / (2 pi |mu|), d xi = Im(mu) Im(conj(mu) d mu) / |mu|^3 (signs below).
+inline Eigen::MatrixXd frequency_damping_perturbation(cd lambda, double fs,
+                                                      const Eigen::Ref<const Eigen::RowVectorXcd>& dlambda) {
+    const cd mu = std::log(lambda) * fs;
+    const double amu = std::abs(mu);
+    const Eigen::RowVectorXcd dmu = dlambda * (fs / lambda);
+    const Eigen::ArrayXd dre = dmu.real().transpose().array(), dim = dmu.imag().transpose().array();
+    Eigen::MatrixXd ut(2, dlambda.size());
+    ut.row(0) = ((mu.real() * dre + mu.imag() * dim) / (2.0 * pi * amu)).matrix().transpose();
+    ut.row(1) = ((-mu.imag() * mu.imag() * dre + mu.real() * mu.imag() * dim) / (amu * amu * amu)).matrix().transpose();
+    return ut;
 }
 
 /// Stage 5 for one mode: rows [f, xi, Re shape (l), Im shape (l)] of the perturbation factor
@@ -364,13 +395,8 @@ inline Eigen::MatrixXd modal_perturbation(cd lambda, double fs, const Eigen::Vec
                                           const Eigen::Ref<const Eigen::RowVectorXcd>& dlambda,
                                           const Eigen::Ref<const Eigen::MatrixXcd>& dshape) {
     const Index l = raw_shape.size(), nb = dlambda.size();
-    const cd mu = std::log(lambda) * fs;
-    const double amu = std::abs(mu);
     Eigen::MatrixXd ut(2 + 2 * l, nb);
-    const Eigen::RowVectorXcd dmu = dlambda * (fs / lambda);  // d mu = fs d lambda / lambda
-    const Eigen::ArrayXd dre = dmu.real().transpose().array(), dim = dmu.imag().transpose().array();
-    ut.row(0) = ((mu.real() * dre + mu.imag() * dim) / (2.0 * pi * amu)).matrix().transpose();
-    ut.row(1) = ((-mu.imag() * mu.imag() * dre + mu.real() * mu.imag() * dim) / (amu * amu * amu)).matrix().transpose();
+    ut.topRows(2) = frequency_damping_perturbation(lambda, fs, dlambda);
     const cd pivot = raw_shape(kref);
     const Eigen::VectorXcd shape = raw_shape / pivot;
     Eigen::MatrixXcd dn = (dshape - shape * dshape.row(kref)) / pivot;
@@ -453,29 +479,36 @@ public:
         if (nm == 0) return;
 
         const detail::OrderContext ctx(eig, ss, re_);
+        const bool frozen = qf_.nb > 0 && n > floor_.k;  // orders up to k* have nothing frozen
         Eigen::MatrixXcd dlam, dlam_f;
         std::vector<Eigen::MatrixXcd> dshape, dshape_f;
-        detail::eigen_perturbation_blocks(ctx, q_, dlam, dshape);
-        const bool frozen = qf_.nb > 0 && n > floor_.k;  // orders up to k* have nothing frozen
-        if (frozen) detail::eigen_perturbation_blocks(ctx, qf_, dlam_f, dshape_f);
-        for (Index i = 0; i < nm; ++i) {
-            const Eigen::VectorXcd raw = ss.C.cast<cd>() * ctx.phi.col(i);
-            const Index kref = modes.reference_component(i);
-            Eigen::MatrixXd ut = detail::modal_perturbation(ctx.lambda(i), fs, raw, kref, dlam.row(i), dshape[i]);
-            if (frozen) {
-                Eigen::MatrixXd ut_f =
-                    detail::modal_perturbation(ctx.lambda(i), fs, raw, kref, dlam_f.row(i), dshape_f[i]);
-                // rho of (5.14): how much of sigma_f or sigma_xi the noise directions carry.
-                double rho = 1.0;
+        std::vector<Eigen::MatrixXd> ut_f;
+        if (frozen) {
+            // Frozen pass in full; the unfrozen one for rho (5.14) and the shapes of flagged poles.
+            detail::eigen_perturbation_blocks(ctx, qf_, dlam_f, dshape_f);
+            for (Index i = 0; i < nm; ++i)
+                ut_f.push_back(detail::modal_perturbation(ctx.lambda(i), fs, ss.C.cast<cd>() * ctx.phi.col(i),
+                                                          modes.reference_component(i), dlam_f.row(i), dshape_f[i]));
+            detail::eigen_perturbation_blocks(ctx, q_, dlam, dshape, [&](Index i) {
+                const Eigen::MatrixXd plain = detail::frequency_damping_perturbation(ctx.lambda(i), fs, dlam.row(i));
+                double rho = 1.0;  // how much of sigma_f or sigma_xi the noise directions carry
                 for (Index row : {0, 1}) {
-                    const double plain = ut.row(row).norm(), fixed = ut_f.row(row).norm();
-                    rho = std::max(rho, fixed > 0.0 ? plain / fixed
-                                                    : (plain > 0.0 ? std::numeric_limits<double>::infinity() : 1.0));
+                    const double p = plain.row(row).norm(), f = ut_f[i].row(row).norm();
+                    rho = std::max(rho, f > 0.0 ? p / f : (p > 0.0 ? std::numeric_limits<double>::infinity() : 1.0));
                 }
                 modes.noise_coupling(i) = rho;
                 modes.noise_coupled(i) = !(rho <= noise_.coupling_limit);
-                if (!modes.noise_coupled(i)) ut = std::move(ut_f);
-            }
+                return bool(modes.noise_coupled(i));
+            });
+        } else {
+            detail::eigen_perturbation_blocks(ctx, q_, dlam, dshape);
+        }
+        for (Index i = 0; i < nm; ++i) {
+            const Eigen::MatrixXd ut =
+                (frozen && !modes.noise_coupled(i))
+                    ? ut_f[i]
+                    : detail::modal_perturbation(ctx.lambda(i), fs, ss.C.cast<cd>() * ctx.phi.col(i),
+                                                 modes.reference_component(i), dlam.row(i), dshape[i]);
             const Eigen::MatrixXd cov = ut * ut.transpose();
             modes.covariance.col(i) = Eigen::Map<const Eigen::VectorXd>(cov.data(), np * np);
             const Eigen::VectorXd sd = cov.diagonal().cwiseMax(0.0).cwiseSqrt();
