@@ -340,6 +340,10 @@ def run(args) -> int:
           + (f"{result.n_blocks} blocks of {result.block_length} columns" if result.n_blocks else "no uncertainty"))
     counts = ", ".join(f"{st.value.replace('_', ' ')} {diagram.count(st)}" for st in PoleStatus)
     print(f"  stabilization diagram: {diagram.n_poles} poles ({counts})")
+    if result.n_blocks:
+        print(f"  noise floor: {result.significant_singular_values} significant singular values of H (an estimate "
+              f"of the model order); {int(diagram.noise_coupled.sum())} pole(s) flagged noise-coupled "
+              f"(no first-order std, docs/uq-math.md §5.5)")
     close = diagram.close_singular_value_orders
     if close:
         print(f"  orders cutting close singular values (their std less reliable): {_describe_orders(list(close))}")

@@ -127,6 +127,7 @@ def report(diagram, selected, *, stamp: dict | None = None, extra: dict | None =
             "n_poles": diagram.n_poles,
             "status_counts": {s.value: diagram.count(s) for s in PoleStatus},
             "close_singular_value_orders": list(diagram.close_singular_value_orders),
+            "noise_coupled_poles": int(np.count_nonzero(diagram.noise_coupled)),
             "criteria": diagram.criteria.to_dict(),
             "has_uncertainty": bool(diagram.has_uncertainty),
             "output_names": list(diagram.output_names),
