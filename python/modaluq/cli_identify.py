@@ -341,9 +341,11 @@ def run(args) -> int:
     counts = ", ".join(f"{st.value.replace('_', ' ')} {diagram.count(st)}" for st in PoleStatus)
     print(f"  stabilization diagram: {diagram.n_poles} poles ({counts})")
     if result.n_blocks:
+        coupled = diagram.noise_coupled
+        stable = np.array([st is PoleStatus.STABLE for st in diagram.status], dtype=bool)
         print(f"  noise floor: {result.significant_singular_values} significant singular values of H (an estimate "
-              f"of the model order); {int(diagram.noise_coupled.sum())} pole(s) flagged noise-coupled "
-              f"(no first-order std, docs/uq-math.md §5.5)")
+              f"of the model order); {int(coupled.sum())} pole(s) noise-coupled, {int((coupled & stable).sum())} "
+              f"of them stable (spurious or mixed with a spurious pole: no first-order std)")
     close = diagram.close_singular_value_orders
     if close:
         print(f"  orders cutting close singular values (their std less reliable): {_describe_orders(list(close))}")

@@ -86,7 +86,8 @@ def stabilization_diagram(diagram, ax=None, *, y=None, spectrum=None, selected=N
     matplotlib.figure.Figure
         With a spectrum, the twin axes holding it comes right after ``ax`` in ``fig.axes``.
         The poles of each status are one errorbar container of ``ax.containers``, labelled
-        ``"<label> (<count>)"``.
+        ``"<label> (<count>)"``. Noise-coupled poles that are not rejected (their σ is not a
+        first-order value, docs/uq-math.md §5.5) are drawn without a σ bar and ringed.
     """
     from .stabilization import Diagram, PoleStatus, output_spectrum_singular_values
 
@@ -125,11 +126,16 @@ def stabilization_diagram(diagram, ax=None, *, y=None, spectrum=None, selected=N
         n = diagram.order[mask]
         xerr = None
         if status is not PoleStatus.REJECTED and diagram.has_uncertainty:
-            xerr = np.nan_to_num(diagram.frequency_std[mask], nan=0.0)
+            # a noise-coupled pole has no first-order σ: no bar (it is ringed below)
+            xerr = np.where(diagram.noise_coupled[mask], 0.0, np.nan_to_num(diagram.frequency_std[mask], nan=0.0))
         h = ax.errorbar(f, n, xerr=xerr, fmt=marker, color=colour, mfc=face, ms=size, lw=0.8,
                         capsize=0, elinewidth=0.8, label=f"{label} ({int(mask.sum())})", zorder=3)
         handles.append(h)
 
+    coupled = diagram.noise_coupled & ~diagram.is_status(PoleStatus.REJECTED)
+    if coupled.any():
+        ax.plot(diagram.frequency_hz[coupled], diagram.order[coupled], "o", mfc="none", mec="k", ms=8, mew=0.8,
+                zorder=4, label=f"noise-coupled: no first-order σ ({int(coupled.sum())})")
     if selected is not None:
         for k, fk in enumerate(selected.frequency_hz):
             ax.axvline(fk, color="k", ls=":", lw=0.8, zorder=2)

@@ -48,8 +48,9 @@ def test_diagram_error_bars_are_plus_minus_one_sigma(small_chain):
         np.testing.assert_array_equal(line.get_xdata(), d.frequency_hz[mask])
         np.testing.assert_array_equal(line.get_ydata(), d.order[mask])
         seg = np.array(bars.get_segments())          # (n, 2 points, xy)
-        np.testing.assert_allclose(seg[:, 0, 0], d.frequency_hz[mask] - d.frequency_std[mask], rtol=1e-12)
-        np.testing.assert_allclose(seg[:, 1, 0], d.frequency_hz[mask] + d.frequency_std[mask], rtol=1e-12)
+        half = np.where(d.noise_coupled[mask], 0.0, d.frequency_std[mask])  # no first-order σ: no bar
+        np.testing.assert_allclose(seg[:, 0, 0], d.frequency_hz[mask] - half, rtol=1e-12)
+        np.testing.assert_allclose(seg[:, 1, 0], d.frequency_hz[mask] + half, rtol=1e-12)
         np.testing.assert_array_equal(seg[:, 0, 1], d.order[mask])
     # rejected poles are drawn, without bars
     c = _container(ax, PoleStatus.REJECTED)
@@ -187,3 +188,24 @@ def test_plot_switches_must_be_booleans(small_chain):
         d.plot(show_rejected="no")
     with pytest.raises(TypeError, match="ncols must be an integer"):
         mode_shapes(sel, ncols=2.0)
+
+
+def test_noise_coupled_poles_are_ringed_without_a_bar():
+    """Orders far above the true one have spurious poles whose σ is not first-order (uq-math §5.5)."""
+    sim = modaluq.simulate(100_000, seed=1)  # the tutorial's record and settings
+    result = modaluq.identify(sim.y, sim.u, fs=sim.fs, block_rows=25, orders=range(2, 61, 2))
+    d = modaluq.stabilization_diagram(result)
+    shown = d.noise_coupled & ~d.is_status(PoleStatus.REJECTED)
+    assert shown.any()
+    ax = d.plot().axes[0]
+    rings = [ln for ln in ax.lines if ln.get_label().startswith("noise-coupled")]
+    assert len(rings) == 1 and rings[0].get_label().endswith(f"({shown.sum()})")
+    np.testing.assert_array_equal(rings[0].get_xdata(), d.frequency_hz[shown])
+    np.testing.assert_array_equal(rings[0].get_ydata(), d.order[shown])
+    for status in (PoleStatus.STABLE, PoleStatus.STABLE_FREQUENCY, PoleStatus.UNSTABLE):
+        c = _container(ax, status)
+        if c is None:
+            continue
+        mask = d.is_status(status)
+        widths = np.ptp(np.array(c.lines[2][0].get_segments())[:, :, 0], axis=1)
+        assert np.all(widths[d.noise_coupled[mask]] == 0)

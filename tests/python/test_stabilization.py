@@ -43,7 +43,9 @@ def make_result(poles_by_order, *, with_std=True, close_orders=()):
         modes.append(Modes(order=n, frequency_hz=np.array([p["f"] for p in rows], float),
                            damping_ratio=np.array([p["xi"] for p in rows], float), mode_shape=shape,
                            eigenvalue=np.zeros(k, complex), reference_component=np.zeros(k, np.int64),
-                           close_singular_values=n in close_orders, **std))
+                           close_singular_values=n in close_orders,
+                           noise_coupled=(np.array([bool(p.get("coupled", False)) for p in rows])
+                                          if with_std else None), **std))
     return Result(modes=tuple(modes), fs=100.0, settings={"fs": 100.0}, singular_values=np.ones(1),
                   n_samples=10_000, n_outputs=n_out, n_inputs=0, n_columns=9_000,
                   n_blocks=50 if with_std else 0, block_length=180, channel_mean=np.zeros(n_out))
@@ -390,3 +392,20 @@ def test_diagram_to_netcdf_round_trip(chain_selection, tmp_path):
         np.testing.assert_allclose(ds["selected_frequency_hz"].values, sel.frequency_hz)
         np.testing.assert_allclose(ds["mode_shape_real"].values + 1j * ds["mode_shape_imag"].values,
                                    diagram.mode_shape)
+
+
+def test_noise_coupled_poles_are_a_column_and_never_the_representative():
+    """A pole whose σ is not first-order (uq-math §5.5) is kept in its cluster but never read from."""
+    poles = two_modes_and_a_spurious_pole()
+    for n in (12, 14, 16):  # the members nearest the cluster's median frequency
+        for p in poles[n]:
+            p["coupled"] = True
+    d = stabilization_diagram(make_result(poles))
+    flagged = d.noise_coupled
+    assert flagged.dtype == bool and flagged.sum() == sum(len(poles[n]) for n in (12, 14, 16))
+    assert list(d.to_dataframe()["noise_coupled"]) == list(flagged)
+    sel = d.select_modes()
+    assert sel.n_modes == 2
+    for k in range(2):
+        assert not flagged[sel.representative_pole[k]]
+        assert d.order[sel.representative_pole[k]] not in (12, 14, 16)

@@ -207,3 +207,44 @@ def test_cli_bad_argument_exits_2_with_one_line(argv, option, capsys):
     err = capsys.readouterr().err.strip()
     assert rc == 2
     assert len(err.splitlines()) == 1 and option in err and err.startswith("modaluq validate: error:")
+
+
+def test_several_orders_from_the_same_records_and_the_other_cases():
+    """--order N1 N2 ...: one result per order, computed from the same simulated records."""
+    kw = dict(processes=1, progress=False, n_bootstrap=0, seed=4)
+    both = monte_carlo(3, order=[12, 24], **kw)
+    assert isinstance(both, tuple) and [r.settings["order"] for r in both] == [12, 24]
+    single = monte_carlo(3, order=24, **kw)
+    np.testing.assert_array_equal(single.frequency_std, both[1].frequency_std)
+    assert both[1].mode_shape.shape == (2, 3, 6, 3) and both[1].noise_coupled.dtype == bool
+    assert both[0].noise_coupled_share.shape == (2, 6)
+    frame = monte_carlo(3, order=8, n_dof=4, input_dofs=(0, 3), unknown_input_std=0.0, damping_ratio=0.01, **kw)
+    assert frame.n_modes == 4 and not frame.settings["paper_case"]
+    np.testing.assert_allclose(frame.true_damping_ratio, 0.01)
+    plain = monte_carlo(3, order=24, freeze_noise=False, **kw)
+    assert not plain.noise_coupled.any() and plain.settings["freeze_noise"] is False
+
+
+def test_cli_several_orders_writes_one_file_set_per_order(tmp_path, capsys):
+    out = tmp_path / "mc"
+    rc = main(["validate", "--records", "3", "--processes", "1", "--no-progress", "--order", "12", "24",
+               "--unknown-input-std", "0", "--damping-ratio", "0.01", "--out", str(out)])
+    captured = capsys.readouterr()
+    assert rc == 0, captured.err
+    assert captured.out.count("# modaluq Monte Carlo validation") == 2
+    assert "Flagged poles, medians and mode shapes" in captured.out
+    for n in (12, 24):
+        back = MonteCarloResult.load(out / f"results_n{n}.npz")
+        assert back.settings["order"] == n and back.settings["simulate_keywords"]["unknown_input_std"] == 0.0
+        assert (out / f"histograms_std_n{n}.png").exists()
+
+
+@pytest.mark.parametrize("argv,option", [
+    (["--unknown-input-std", "-1"], "--unknown-input-std"),
+    (["--damping-ratio", "0"], "--damping-ratio"),
+    (["--noise-coupling-limit", "0.5"], "--noise-coupling-limit"),
+])
+def test_cli_new_options_are_checked(argv, option, capsys):
+    rc = main(["validate", "--no-progress", "--processes", "1", *argv])
+    err = capsys.readouterr().err.strip()
+    assert rc == 2 and option in err
