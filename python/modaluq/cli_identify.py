@@ -177,15 +177,6 @@ def _largest_order(block_rows, past_block_rows, n_samples, n_outputs, n_referenc
                  f"--past-block-rows {q}, {n_outputs} outputs and {n_references} references")
 
 
-def _default_orders(block_rows, largest):
-    top = min(80, largest)
-    top -= top % 2
-    if top < 2:
-        raise ValueError(f"--block-rows {block_rows} is too small: the largest model order is {largest}, no even "
-                         "order fits; increase --block-rows or give --orders")
-    return list(range(2, top + 1, 2))
-
-
 def _describe_orders(orders) -> str:
     if len(orders) > 2:
         steps = set(np.diff(orders).tolist())
@@ -201,8 +192,10 @@ def run(args) -> int:
     from . import __version__, export
     from ._core import NumericalError
     from .cli import _CliError
+    from .auto_settings import choose_settings
     from .identification import identify
     from .io import load
+    from .preprocess import preprocess
     from .stabilization import (ClusteringSettings, PoleStatus, StabilityCriteria, select_modes,
                                  stabilization_diagram)
 
@@ -256,25 +249,38 @@ def run(args) -> int:
         out_names = [names[k] for k in out_idx]
         in_names = [names[k] for k in in_idx]
         refs = _resolve_channels(args.references, out_names, "--references") if args.references else None
-        largest, bound = _largest_order(args.block_rows, args.past_block_rows, rec.n_samples, len(out_idx),
+        # window, band, decimation: the identification and the spectrum use the processed samples
+        pre = preprocess(y, u, fs=rec.fs, frequency_range=args.frequency_range, start=args.start, stop=args.stop,
+                         decimate=args.decimate, detrend=args.detrend, highpass=args.highpass)
+        y, u = pre.y, pre.u
+        block_rows = args.block_rows
+        if block_rows is None:  # chosen from the data (docs/settings.md)
+            block_rows = choose_settings(pre.n_samples, pre.fs, len(out_idx), frequency_range=pre.frequency_range,
+                                         n_references=len(refs) if refs else None, orders=(2,),
+                                         n_blocks=2).block_rows
+        largest, bound = _largest_order(block_rows, args.past_block_rows, pre.n_samples, len(out_idx),
                                         len(refs) if refs else len(out_idx))
-        if args.orders is None:
-            orders = _default_orders(args.block_rows, largest)
-        else:
-            orders = parse_orders(args.orders, largest, bound=bound)
+        orders = None if args.orders is None else parse_orders(args.orders, largest, bound=bound)
         progress.update()
 
         # ------------------------------------------------------------------ identify
-        progress.set_description_str(f"identifying ({len(orders)} orders)")
+        progress.set_description_str("identifying")
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             try:
-                result = identify(y, u, fs=rec.fs, block_rows=args.block_rows,
+                result = identify(y, u, fs=pre.fs, block_rows=block_rows,
                                   past_block_rows=args.past_block_rows, orders=orders,
                                   n_blocks=args.n_blocks, references=refs,
-                                  uncertainty=not args.no_uncertainty)
+                                  uncertainty=not args.no_uncertainty, frequency_range=pre.frequency_range,
+                                  decimate=1)
             except NumericalError as exc:
                 raise _CliError(f"numerical failure in the identification: {exc}") from None
+        # what was done to the file's samples (identify saw them already processed)
+        result.settings["preprocessing"] = pre.settings()
+        if args.block_rows is None:
+            result.settings.setdefault("chosen", []).insert(0, choose_settings(
+                pre.n_samples, pre.fs, len(out_idx), frequency_range=pre.frequency_range,
+                n_references=len(refs) if refs else None, orders=(2,), n_blocks=2).reasons[0])
         progress.update()
 
         progress.set_description_str("stabilization diagram")
@@ -292,7 +298,7 @@ def run(args) -> int:
         if args.plot:
             progress.set_description_str("plotting the diagram")
             fig = Figure(figsize=(9.0, 6.0), layout="constrained")
-            diagram.plot(ax=fig.add_subplot(), y=y, selected=selected)
+            diagram.plot(ax=fig.add_subplot(), y=y, selected=selected, nperseg=args.nperseg)
             fig.savefig(args.plot, dpi=args.dpi)
             written.append(args.plot)
             progress.update()
@@ -335,6 +341,10 @@ def run(args) -> int:
     print(f"  {rec.n_samples} samples at {rec.fs:g} Hz ({rec.n_samples / rec.fs:g} s), {kind}; "
           f"outputs: {', '.join(out_names)}" + (f"; inputs: {', '.join(in_names)}" if in_names else ""))
     s = result.settings
+    for step in s.get("preprocessing", {}).get("steps", []):
+        print(f"  {step}")
+    for why in s.get("chosen", []):
+        print(f"  chosen: {why}")
     print(f"  block_rows={s['block_rows']}, past_block_rows={s['past_block_rows']}, "
           f"orders {_describe_orders(list(result.orders))}, "
           + (f"{result.n_blocks} blocks of {result.block_length} columns" if result.n_blocks else "no uncertainty"))
@@ -391,16 +401,30 @@ def register(subparsers) -> argparse.ArgumentParser:
                    help="known-input channels (default: none, i.e. output-only, unless the file declares inputs)")
     g.add_argument("--outputs", nargs="+", metavar="CH", default=None,
                    help="output channels (default: every channel that is not an input)")
+    g = p.add_argument_group("preprocessing (applied to outputs and inputs alike)")
+    g.add_argument("--frequency-range", nargs=2, type=real_option(0, low_open=False), default=None,
+                   metavar=("LO", "HI"), help="band of interest in Hz: decimation to about 3 x HI, the settings, "
+                                              "the diagram and the plot follow it")
+    g.add_argument("--start", type=real_option(0, low_open=False), default=None, metavar="S",
+                   help="start of the time window, s from the first sample")
+    g.add_argument("--stop", type=real_option(0), default=None, metavar="S", help="end of the time window, s")
+    g.add_argument("--decimate", type=integer_option(1), default=None, metavar="Q",
+                   help="integer decimation factor (default: from --frequency-range, else none)")
+    g.add_argument("--detrend", choices=["constant", "linear"], default=None, help="detrend every channel")
+    g.add_argument("--highpass", type=real_option(0), default=None, metavar="HZ",
+                   help="corner of a zero-phase 4th-order Butterworth high-pass, Hz")
     g = p.add_argument_group("identification")
-    g.add_argument("--block-rows", type=integer_option(2), default=20, metavar="P",
-                   help="future block rows p (default 20); the largest order is (p-1) x n_outputs")
+    g.add_argument("--block-rows", type=integer_option(2), default=None, metavar="P",
+                   help="future block rows p (default: chosen from fs, the band and the record, "
+                        "docs/settings.md); the largest order is (p-1) x n_outputs")
     g.add_argument("--past-block-rows", type=integer_option(1), default=None, metavar="Q",
                    help="past block rows q (default p)")
     g.add_argument("--orders", default=None, metavar="SPEC",
                    help="model orders: a:b:step (b included), a:b, n or a comma list "
-                        "(default 2:M:2, M = min(80, (p-1) n_outputs, q n_references))")
-    g.add_argument("--n-blocks", type=integer_option(2), default=50, metavar="NB",
-                   help="blocks for the covariance of the uncertainty (default 50)")
+                        "(default 2:M:2, M = min(100, (p-1) n_outputs, q n_references))")
+    g.add_argument("--n-blocks", type=integer_option(2), default=None, metavar="NB",
+                   help="blocks for the covariance of the uncertainty (default: blocks of half the decay "
+                        "time of a 1 %%-damped mode at the band's lowest frequency, 10-50; docs/settings.md)")
     g.add_argument("--references", nargs="+", metavar="CH", default=None,
                    help="reference outputs of the past data matrix (default: all outputs)")
     g.add_argument("--no-uncertainty", action="store_true",
@@ -425,6 +449,9 @@ def register(subparsers) -> argparse.ArgumentParser:
     g.add_argument("--plot", metavar="IMAGE", default=None,
                    help="write the stabilization diagram over the output spectrum (.png, .pdf, .svg ...)")
     g.add_argument("--plot-shapes", metavar="IMAGE", default=None, help="write the selected mode shapes with ±1σ")
+    g.add_argument("--nperseg", type=integer_option(8), default=None, metavar="N",
+                   help="Welch segment length of the diagram's spectrum, samples after decimation "
+                        "(default: the spectrum function's)")
     g.add_argument("--dpi", type=real_option(0, MAX_DPI), default=120,
                    help=f"resolution of raster images (default 120, at most {MAX_DPI})")
     g.add_argument("--out", action="append", metavar="PATH", default=None,

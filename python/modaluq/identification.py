@@ -8,132 +8,25 @@ plain frozen dataclasses that print, convert to pandas and plot.
 
 from __future__ import annotations
 
-import math
-import numbers
 import warnings
 from dataclasses import dataclass, field
-from typing import Iterable, Sequence
+from typing import Sequence
 
 import numpy as np
 
 from . import _core
 from ._blas import single_threaded as single_threaded_blas
+# The argument checks live in _checks (every layer uses them); their names stay importable here.
+from ._checks import (MAX_COUNT, MAX_THREADS, _boolean, _integer, _integers, _real,  # noqa: F401
+                      _sampling_frequency, as_samples)
+from .auto_settings import choose_settings, lag_warning
+from .preprocess import preprocess
 
 __all__ = ["Modes", "Result", "ModalUQWarning", "identify", "as_samples", "core_options"]
 
 
 class ModalUQWarning(UserWarning):
     """A result is computed but a quality flag is set (see ``Result.warnings``)."""
-
-
-# --------------------------------------------------------------------------- argument checks
-
-
-#: Largest value of a count (samples, channels, block rows, blocks, orders, indices): products of
-#: two counts then stay inside the core's 64-bit indices, so a typo is refused here, by name,
-#: rather than overflowing there.
-MAX_COUNT = 2**31 - 1
-#: Largest ``threads``: above any machine's cores, low enough that a typo is refused.
-MAX_THREADS = 256
-
-
-def as_samples(x, name: str, *, allow_none: bool = False, n_channels: int | None = None):
-    """Return ``x`` as a C-contiguous float64 ``(n_samples, n_channels)`` array.
-
-    A 1-D array is one channel. Complex, boolean or non-numeric data raise ``TypeError``; more
-    than two dimensions, a masked value of a :class:`numpy.ma.MaskedArray` (missing data, which
-    SSI-cov cannot take) or the wrong number of channels raise ``ValueError``; all name the
-    argument. With ``n_channels`` (a chunk of a stream, which may hold fewer samples than
-    channels) ``x`` must have that many columns; without it ``x`` is a whole record, which must
-    have more samples than channels (otherwise it is taken for a transposed array). No copy is
-    made when ``x`` already is a C-contiguous float64 array.
-    """
-    if x is None:
-        if allow_none:
-            return None
-        raise TypeError(f"{name} must be an array of samples, got None")
-    mask = np.ma.getmaskarray(x) if isinstance(x, np.ma.MaskedArray) else None
-    arr = np.asarray(x)  # a MaskedArray's data, mask dropped: checked below
-    if np.iscomplexobj(arr):
-        raise TypeError(f"{name} must be real; got complex data (dtype {arr.dtype})")
-    if arr.dtype.kind == "b":  # True/False are not measurements (astype(float) if 0/1 is meant)
-        raise TypeError(f"{name} must hold real numbers; got booleans (dtype bool)")
-    if arr.dtype.kind not in "iuf":
-        raise TypeError(f"{name} must hold real numbers; got dtype {arr.dtype}")
-    transposable = arr.ndim == 2
-    if arr.ndim == 1:
-        arr = arr[:, None]
-    elif arr.ndim != 2:
-        raise ValueError(f"{name} must have shape (n_samples, n_channels) or (n_samples,); got shape {arr.shape}")
-    if mask is not None and mask.any():
-        sample, channel = np.argwhere(mask.reshape(arr.shape))[0]
-        raise ValueError(f"{name}: sample {sample}, channel {channel} is masked (missing data); SSI-cov needs "
-                         "every sample: fill the gap or analyse the parts on either side of it")
-    if n_channels is not None:
-        if arr.shape[1] != n_channels:
-            hint = f"; did you mean {name}.T?" if transposable and arr.shape[0] == n_channels else ""
-            raise ValueError(f"{name} must have {n_channels} channels (columns); got shape {arr.shape}{hint}")
-    elif arr.shape[1] == 0:
-        raise ValueError(f"{name} must have at least one channel; got shape {arr.shape}")
-    elif arr.shape[0] == 0:
-        raise ValueError(f"{name} must have at least one sample; got shape {arr.shape}")
-    elif arr.shape[1] > arr.shape[0]:
-        raise ValueError(f"{name} has shape {arr.shape}: more channels ({arr.shape[1]}) than samples "
-                         f"({arr.shape[0]}); samples are rows, channels columns: did you mean {name}.T?")
-    return np.ascontiguousarray(arr, dtype=np.float64)
-
-
-def _boolean(name, value) -> bool:
-    # bool("False") is True: a string or a number where a switch is expected is a mistake.
-    if not isinstance(value, (bool, np.bool_)):
-        raise TypeError(f"{name} must be True or False; got {value!r}")
-    return bool(value)
-
-
-def _integer(name, value, *, minimum=None, maximum=MAX_COUNT):
-    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Integral):
-        raise TypeError(f"{name} must be an integer; got {value!r}")
-    value = int(value)
-    if minimum is not None and value < minimum:
-        raise ValueError(f"{name} must be >= {minimum}; got {value}")
-    if maximum is not None and value > maximum:
-        raise ValueError(f"{name} must be <= {maximum}; got {value}")
-    return value
-
-
-def _integers(name, values, *, minimum=None, maximum=MAX_COUNT) -> list[int]:
-    if isinstance(values, numbers.Integral) and not isinstance(values, (bool, np.bool_)):
-        values = [values]
-    if isinstance(values, (str, bytes)) or not isinstance(values, Iterable):
-        raise TypeError(f"{name} must be an integer or an iterable of integers; got {values!r}")
-    out = [_integer(name, v, minimum=minimum, maximum=maximum) for v in values]
-    if not out:
-        raise ValueError(f"{name} must not be empty")
-    return out
-
-
-def _real(name, value, *, low=None, high=None, low_open=False, high_open=False, allow_none=False):
-    if value is None and allow_none:
-        return None
-    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
-        raise TypeError(f"{name} must be a real number; got {value!r}")
-    value = float(value)
-    if not math.isfinite(value):
-        raise ValueError(f"{name} must be finite; got {value}")
-    if low is not None and (value < low or (low_open and value == low)):
-        raise ValueError(f"{name} must be {'>' if low_open else '>='} {low}; got {value}")
-    if high is not None and (value > high or (high_open and value == high)):
-        raise ValueError(f"{name} must be {'<' if high_open else '<='} {high}; got {value}")
-    return value
-
-
-def _sampling_frequency(fs) -> float:
-    if isinstance(fs, (bool, np.bool_)) or not isinstance(fs, numbers.Real):
-        raise TypeError(f"fs must be a real number in Hz; got {fs!r}")
-    fs = float(fs)
-    if not np.isfinite(fs) or fs <= 0:
-        raise ValueError(f"fs must be finite and > 0 Hz; got {fs}")
-    return fs
 
 
 def core_options(*, fs, block_rows, past_block_rows=None, orders, n_blocks=50, references=None,
@@ -378,7 +271,7 @@ class Result:
                 f"n_samples={self.n_samples}, n_outputs={self.n_outputs}, n_inputs={self.n_inputs})")
 
 
-def _result_from_core(ident, settings, n_outputs, n_inputs) -> Result:
+def _result_from_core(ident, settings, n_outputs, n_inputs, extra_warnings=()) -> Result:
     return Result(
         modes=tuple(Modes._from_core(m) for m in ident.modes),
         fs=settings["fs"],
@@ -399,7 +292,7 @@ def _result_from_core(ident, settings, n_outputs, n_inputs) -> Result:
         signal_to_noise=float(ident.signal_to_noise),
         low_signal_to_noise=bool(ident.low_signal_to_noise),
         significant_singular_values=int(ident.significant_singular_values),
-        warnings=tuple(ident.warnings),
+        warnings=tuple(ident.warnings) + tuple(extra_warnings),
     )
 
 
@@ -425,10 +318,13 @@ def _warn(result: Result, stacklevel: int = 3) -> None:
         warnings.warn(w, ModalUQWarning, stacklevel=stacklevel)
 
 
-def identify(y, u=None, *, fs: float, block_rows: int, past_block_rows: int | None = None,
-             orders: int | Sequence[int], n_blocks: int = 50, references: Sequence[int] | None = None,
-             uncertainty: bool = True, demean: bool = True, input_rcond: float = 1e-10,
-             threads: int = 1, freeze_noise: bool = True, noise_coupling_limit: float = 20.0) -> Result:
+def identify(y, u=None, *, fs: float, block_rows: int | None = None, past_block_rows: int | None = None,
+             orders: int | Sequence[int] | None = None, n_blocks: int | None = None,
+             references: Sequence[int] | None = None, uncertainty: bool = True, demean: bool = True,
+             input_rcond: float = 1e-10, threads: int = 1, freeze_noise: bool = True,
+             noise_coupling_limit: float = 20.0, frequency_range=None, start: float | None = None,
+             stop: float | None = None, decimate: int | None = None, detrend: str | None = None,
+             highpass: float | None = None) -> Result:
     """Identify modes by covariance-driven SSI, with their standard deviations.
 
     Parameters
@@ -439,16 +335,20 @@ def identify(y, u=None, *, fs: float, block_rows: int, past_block_rows: int | No
         Measured inputs (forces, ground motion). ``None`` for output-only identification.
     fs : float
         Sampling frequency in Hz.
-    block_rows : int
-        Future block rows p of the Hankel covariance (>= 2).
+    block_rows : int, optional
+        Future block rows p of the Hankel covariance (>= 2). Default: chosen from the data
+        (:mod:`modaluq.auto_settings`, docs/settings.md): lags of two periods of the band's
+        lowest frequency. The choices and why are in ``Result.settings["chosen"]``.
     past_block_rows : int, optional
         Past block rows q (default p).
-    orders : int or iterable of int
+    orders : int or iterable of int, optional
         Model orders; each must be <= min((p-1) n_outputs, q n_references). All orders come
-        from one SVD at the largest.
-    n_blocks : int
+        from one SVD at the largest. Default: 2, 4, ... up to what the horizon allows (at most 100).
+    n_blocks : int, optional
         Blocks for the covariance of the data covariances (>= 2). Each block should be longer
-        than the slowest mode's decay time; ``Result.warnings`` says when it is not.
+        than the slowest mode's decay time; ``Result.warnings`` says when it is not. Default:
+        blocks of half the decay time of a 1 %-damped mode at the band's lowest frequency,
+        10 (at least 2 n_outputs + 3) to 50 of them.
     references : iterable of int, optional
         Outputs that form the past data matrix (default all).
     uncertainty : bool
@@ -478,10 +378,24 @@ def identify(y, u=None, *, fs: float, block_rows: int, past_block_rows: int | No
         spurious or mixed with a spurious pole, no first-order value is meaningful, and it
         keeps the unfrozen, conservative standard deviations.
 
+    frequency_range : (float, float), optional
+        Band of interest (f_low, f_high) in Hz. The record is decimated (anti-aliased) to a
+        rate of about 3 f_high unless ``decimate`` says otherwise, the automatic settings follow
+        the band, and the stabilization diagram rejects poles outside it.
+    start, stop : float, optional
+        Time window in seconds from the first sample.
+    decimate : int, optional
+        Integer decimation factor (default: from ``frequency_range``, else none).
+    detrend : {"constant", "linear", None}
+        Detrend each channel before filtering.
+    highpass : float, optional
+        Corner in Hz of a zero-phase 4th-order Butterworth high-pass applied to y and u.
+
     Returns
     -------
     Result
-        ``result.at_order(n)`` gives the :class:`Modes` of order n.
+        ``result.at_order(n)`` gives the :class:`Modes` of order n. ``result.fs`` is the rate
+        identified at (after decimation); ``result.settings["preprocessing"]`` says what was done.
 
     Examples
     --------
@@ -492,17 +406,41 @@ def identify(y, u=None, *, fs: float, block_rows: int, past_block_rows: int | No
     >>> [round(float(f), 1) for f in modes.frequency_hz]
     [1.9, 5.6, 8.7, 14.5, 15.8, 17.0]
     """
-    o = core_options(fs=fs, block_rows=block_rows, past_block_rows=past_block_rows, orders=orders,
-                     n_blocks=n_blocks, references=references, uncertainty=uncertainty, demean=demean,
-                     input_rcond=input_rcond, threads=threads, freeze_noise=freeze_noise,
-                     noise_coupling_limit=noise_coupling_limit)
+    fs = _sampling_frequency(fs)
     y = as_samples(y, "y")
     u = as_samples(u, "u", allow_none=True)
     if u is not None and u.shape[0] != y.shape[0]:
         raise ValueError(f"u must have as many samples as y ({y.shape[0]}); got {u.shape[0]}")
+    pre = None
+    if any(x is not None for x in (frequency_range, start, stop, decimate, detrend, highpass)):
+        pre = preprocess(y, u, fs=fs, frequency_range=frequency_range, start=start, stop=stop, decimate=decimate,
+                         detrend=detrend, highpass=highpass)
+        y, u, fs = pre.y, pre.u, pre.fs
+    band = None if pre is None else pre.frequency_range
+    chosen = None
+    if block_rows is None or orders is None or n_blocks is None:
+        n_refs = None if references is None else len(_integers("references", references, minimum=0))
+        chosen = choose_settings(y.shape[0], fs, y.shape[1], frequency_range=band, n_references=n_refs,
+                                 block_rows=block_rows, orders=orders, n_blocks=n_blocks)
+        block_rows, orders, n_blocks = chosen.block_rows, chosen.orders, chosen.n_blocks
+    o = core_options(fs=fs, block_rows=block_rows, past_block_rows=past_block_rows, orders=orders,
+                     n_blocks=n_blocks, references=references, uncertainty=uncertainty, demean=demean,
+                     input_rcond=input_rcond, threads=threads, freeze_noise=freeze_noise,
+                     noise_coupling_limit=noise_coupling_limit)
     u_t = np.empty((0, y.shape[0])) if u is None else u.T
     with single_threaded_blas():
         ident = _core.identify(y.T, u_t, o)
-    result = _result_from_core(ident, _settings(o, y.shape[1]), y.shape[1], 0 if u is None else u.shape[1])
+    settings = _settings(o, y.shape[1])
+    settings["frequency_range"] = None if band is None else list(band)
+    if pre is not None:
+        settings["preprocessing"] = pre.settings()
+    if chosen is not None:
+        settings["chosen"] = list(chosen.reasons)
+    extra = []
+    if chosen is None or not any(r.startswith("block_rows") for r in chosen.reasons):
+        lag = lag_warning(o.block_rows, o.fs, band)
+        if lag:
+            extra.append(lag)
+    result = _result_from_core(ident, settings, y.shape[1], 0 if u is None else u.shape[1], extra_warnings=extra)
     _warn(result)
     return result

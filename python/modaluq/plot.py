@@ -77,7 +77,8 @@ def stabilization_diagram(diagram, ax=None, *, y=None, spectrum=None, selected=N
     nperseg : int, optional
         Welch segment length of the spectrum (see ``output_spectrum_singular_values``).
     frequency_range : (float, float), optional
-        Horizontal limits in Hz; default 0 to fs/2.
+        Horizontal limits in Hz; default the band given to ``identify`` (``frequency_range``),
+        else 0 to fs/2.
     figsize : (float, float)
         Size in inches of a new figure.
 
@@ -141,6 +142,8 @@ def stabilization_diagram(diagram, ax=None, *, y=None, spectrum=None, selected=N
             ax.axvline(fk, color="k", ls=":", lw=0.8, zorder=2)
             ax.annotate(str(k + 1), (fk, 1.0), xycoords=("data", "axes fraction"), xytext=(0, 2),
                         textcoords="offset points", ha="center", va="bottom", fontsize=8)
+    if frequency_range is None:  # the band the identification was given, else 0 to fs/2
+        frequency_range = (diagram.result_settings or {}).get("frequency_range")
     lo, hi = (0.0, diagram.fs / 2) if frequency_range is None else map(float, frequency_range)
     ax.set_xlim(lo, hi)
     if diagram.orders:

@@ -515,9 +515,13 @@ def stabilization_diagram(result, criteria: StabilityCriteria | None = None, *,
     mac = np.full(n_poles, np.nan)
     dz = np.full(n_poles, np.nan)
 
+    # The band of interest given to identify (frequency_range): poles outside it are rejected.
+    band = result.settings.get("frequency_range") if isinstance(result.settings, dict) else None
     valid = np.zeros(n_poles, dtype=bool)
     for i in range(n_poles):
         r = _pole_checks(f[i], xi[i], sf[i], c, has_std)
+        if band is not None and not band[0] <= f[i] <= band[1]:
+            r = [f"outside the band {band[0]:g}-{band[1]:g} Hz"] + r
         if r:
             status[i], reason[i] = PoleStatus.REJECTED, "; ".join(r)
         valid[i] = not r

@@ -1,0 +1,139 @@
+"""Identification settings chosen from the data when the user gives none (docs/settings.md).
+
+The rules, in order (fs is the rate after any decimation, T the record length in seconds, l the
+outputs, f_low the band's lower edge):
+
+1. **Horizon.** The lags of H must span at least ``LAG_PERIODS`` periods of the slowest mode of
+   interest: block_rows p = ceil(LAG_PERIODS · fs / f_low). Without a band, f_low = fs / 20
+   (p = 40). p is at least 1 + ceil(MIN_ORDER / l) (so that order MIN_ORDER fits) and at most
+   MAX_ROWS / l (H at most MAX_ROWS × MAX_ROWS: the cost grows with its size cubed) and what
+   lets the record hold the minimum number of blocks of BLOCK_SPAN (p + q) columns. Longer lags
+   resolve closer modes but add estimation noise: lags far beyond the decay times only add
+   noise, and the noise floor k* of the result drops.
+2. **Orders.** 2, 4, ..., n_max with n_max = min((p − 1) l, q r, MAX_ORDER): one SVD serves them
+   all; the noise floor k* of the result says where the noise starts.
+3. **Blocks.** Each block should last at least half the decay time 1/(2π f ξ) of a mode at
+   f_low with the damping XI_REF, so that the blocks are nearly independent: n_b =
+   floor(T / (0.5 / (2π f_low XI_REF))), clipped to [max(MIN_BLOCKS, 2 l + 3), MAX_BLOCKS]
+   (2 l + 3 blocks give every mode's joint covariance full rank), and at most as many as hold
+   BLOCK_SPAN (p + q) columns each. A record too short for that gets the minimum and the core's
+   ``block_too_short`` warning says so.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from ._checks import _integer, _real, _sampling_frequency
+
+__all__ = ["ChosenSettings", "choose_settings", "LAG_PERIODS", "MAX_ROWS", "MAX_ORDER", "MIN_ORDER",
+           "XI_REF", "MIN_BLOCKS", "MAX_BLOCKS"]
+
+LAG_PERIODS = 2.0   #: periods of the lowest frequency of interest spanned by the lags
+BLOCK_SPAN = 2      #: a block holds at least this many times p + q Hankel columns
+MAX_ROWS = 600      #: largest number of rows p l of H
+MIN_ORDER = 20      #: the horizon must allow at least this order
+MAX_ORDER = 100     #: largest automatic order
+XI_REF = 0.01       #: damping ratio (fraction) assumed for the block-length rule
+MIN_BLOCKS = 10     #: fewest automatic blocks (before the 2 l + 3 rule)
+MAX_BLOCKS = 50     #: most automatic blocks (the paper's number)
+
+
+@dataclass(frozen=True)
+class ChosenSettings:
+    """What :func:`choose_settings` chose, and why."""
+
+    block_rows: int
+    orders: tuple
+    n_blocks: int
+    reasons: tuple      #: one sentence per setting, with the numbers
+
+    def as_dict(self) -> dict:
+        return {"block_rows": self.block_rows, "orders": list(self.orders), "n_blocks": self.n_blocks,
+                "reasons": list(self.reasons)}
+
+
+def lowest_frequency(fs: float, frequency_range=None) -> float:
+    """The f_low of the rules: the band's lower edge, or fs / 20 without a band (or a band from 0 Hz,
+    then the smaller of fs / 20 and a tenth of its upper edge)."""
+    if frequency_range is None:
+        return fs / 20.0
+    lo, hi = frequency_range
+    return lo if lo > 0 else min(fs / 20.0, hi / 10.0)
+
+
+def choose_settings(n_samples: int, fs: float, n_outputs: int, *, frequency_range=None,
+                    n_references: int | None = None, block_rows: int | None = None,
+                    orders=None, n_blocks: int | None = None) -> ChosenSettings:
+    """Fill in ``block_rows``, ``orders`` and ``n_blocks`` by the rules of this module.
+
+    Settings given are kept (and the others are chosen around them). Returns
+    :class:`ChosenSettings` whose ``reasons`` say what was chosen from what.
+
+    Examples
+    --------
+    >>> s = choose_settings(16_384, 106.25, 3, frequency_range=(10.0, 30.0))
+    >>> s.block_rows, s.orders[-1], s.n_blocks
+    (22, 62, 50)
+    """
+    n_samples = _integer("n_samples", n_samples, minimum=1)
+    fs = _sampling_frequency(fs)
+    l = _integer("n_outputs", n_outputs, minimum=1)
+    r = l if n_references is None else _integer("n_references", n_references, minimum=1)
+    f_low = lowest_frequency(fs, frequency_range)
+    reasons = []
+    nb_min = max(MIN_BLOCKS, 2 * l + 3)
+    if block_rows is None:
+        p_want = math.ceil(LAG_PERIODS * fs / f_low)
+        p_min = 1 + math.ceil(MIN_ORDER / l)
+        p_rows = MAX_ROWS // l
+        p_length = (n_samples + 1) // (2 * BLOCK_SPAN * nb_min + 2)  # nb_min blocks of BLOCK_SPAN (p + q) columns
+        p = max(min(p_want, p_rows, p_length), min(p_min, p_length), 2)
+        why = f"block_rows = {p}: lags of {p / fs:.3g} s"
+        if p == p_want:
+            why += f", {LAG_PERIODS:g} periods of f_low = {f_low:.3g} Hz"
+        elif p < p_want:
+            cap = (f"H is capped at {MAX_ROWS} rows ({l} outputs)" if p == p_rows else
+                   f"the record ({n_samples} samples) holds {nb_min} blocks of {BLOCK_SPAN} (p + q) columns only")
+            why += (f", fewer than the {p_want} for {LAG_PERIODS:g} periods of f_low = {f_low:.3g} Hz: {cap}; "
+                    "decimate, narrow the band or record longer to reach it")
+        else:
+            why += f", the fewest for order {MIN_ORDER} with {l} outputs"
+        reasons.append(why)
+    else:
+        p = _integer("block_rows", block_rows, minimum=2)
+    limit = min((p - 1) * l, p * r)
+    if orders is None:
+        n_max = max(2, min(limit, MAX_ORDER) // 2 * 2)
+        orders = tuple(range(2, n_max + 1, 2))
+        reasons.append(f"orders 2..{n_max} step 2 (the horizon allows up to {limit})")
+    if n_blocks is None:
+        duration = n_samples / fs
+        decay = 1.0 / (2.0 * math.pi * f_low * XI_REF)
+        nb = int(duration // (0.5 * decay))
+        nb_fit = max(2, (n_samples - 2 * p + 1) // (2 * BLOCK_SPAN * p))  # blocks of BLOCK_SPAN (p + q) columns
+        n_b = min(max(nb, nb_min), MAX_BLOCKS, nb_fit)
+        why = (f"n_blocks = {n_b}: blocks of {duration / n_b:.3g} s against a decay time 1/(2π f ξ) = "
+               f"{decay:.3g} s at f_low = {f_low:.3g} Hz, ξ = {100 * XI_REF:g} %")
+        if nb < nb_min:
+            why += (f"; the record ({duration:.3g} s) is too short for {nb_min} blocks of half that decay time, "
+                    f"so the standard deviations of the slowest modes are less reliable")
+        reasons.append(why)
+    else:
+        n_b = _integer("n_blocks", n_blocks, minimum=2)
+    return ChosenSettings(block_rows=p, orders=tuple(orders) if not isinstance(orders, int) else (orders,),
+                          n_blocks=n_b, reasons=tuple(reasons))
+
+
+def lag_warning(block_rows: int, fs: float, frequency_range) -> str | None:
+    """A sentence when user-chosen lags cannot span one period of the band's lowest frequency."""
+    if frequency_range is None or frequency_range[0] <= 0:
+        return None
+    f_low = _real("frequency_range[0]", frequency_range[0], low=0, low_open=True)
+    if block_rows / fs * f_low >= 1.0:
+        return None
+    need = math.ceil(LAG_PERIODS * fs / f_low)
+    return (f"block_rows = {block_rows} gives lags of {block_rows / fs:.3g} s, less than one period of the band's "
+            f"lowest frequency {f_low:g} Hz ({1 / f_low:.3g} s): its modes are poorly identified; use block_rows "
+            f">= {math.ceil(fs / f_low)} (the automatic choice is {need})")
