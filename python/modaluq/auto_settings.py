@@ -32,7 +32,7 @@ __all__ = ["ChosenSettings", "choose_settings", "LAG_PERIODS", "MAX_ROWS", "MAX_
 
 LAG_PERIODS = 2.0   #: periods of the lowest frequency of interest spanned by the lags
 BLOCK_SPAN = 2      #: a block holds at least this many times p + q Hankel columns
-MAX_ROWS = 600      #: largest number of rows p l of H
+MAX_ROWS = 300      #: largest number of rows p l of H (larger: the noise floor k* falls, docs/settings.md)
 MIN_ORDER = 20      #: the horizon must allow at least this order
 MAX_ORDER = 100     #: largest automatic order
 XI_REF = 0.01       #: damping ratio (fraction) assumed for the block-length rule

@@ -260,11 +260,31 @@ class Result:
             + (f"{self.n_blocks} blocks of {self.block_length} columns" if self.n_blocks else "no uncertainty"),
         ]
         lines += [f"warning: {w}" for w in self.warnings]
-        shown = self.modes if len(self.modes) <= 3 else self.modes[-1:]
-        if len(self.modes) > 3:
-            lines.append(f"(highest order shown; use at_order(n) for the {len(self.modes) - 1} others)")
-        lines += [str(m) for m in shown]
+        if self.significant_singular_values:
+            lines.append(f"noise floor: {self.significant_singular_values} significant singular values of H")
+        if len(self.modes) <= 3:
+            lines += [str(m) for m in self.modes]
+            return "\n".join(lines)
+        # A diagram: what an engineer reads from it is the selected modes, not its highest order.
+        selected = None
+        if self._has_modes():
+            try:
+                selected = self.stabilization_diagram().select_modes()
+            except (ValueError, ImportError):  # e.g. SciPy missing: fall back to one order
+                selected = None
+        if selected is not None and selected.n_modes:
+            lines.append(str(selected))
+            lines.append(f"(selected from the stabilization diagram of {len(self.modes)} orders; "
+                         "result.at_order(n) gives one order)")
+        else:
+            lines.append(f"no mode selected from the {len(self.modes)} orders; highest order shown "
+                         "(result.at_order(n) gives the others)")
+            lines.append(str(self.modes[-1]))
         return "\n".join(lines)
+
+    def _has_modes(self) -> bool:
+        """Whether any order has modes (a diagram can be formed)."""
+        return any(m.n_modes for m in self.modes)
 
     def __repr__(self) -> str:
         return (f"Result(orders={list(self.orders)[:6]}{'...' if len(self.orders) > 6 else ''}, "

@@ -50,6 +50,10 @@ def _axes(ax, figsize):
     return ax.figure, ax
 
 
+#: The spectrum behind a diagram is drawn down to this fraction of its largest value in the band.
+SPECTRUM_DECADES_FLOOR = 1e-6
+
+
 def stabilization_diagram(diagram, ax=None, *, y=None, spectrum=None, selected=None, show_rejected=True,
                           nperseg=None, frequency_range=None, figsize=(9.0, 6.0)):
     """Stabilization diagram: every pole at (frequency, model order) with ±σ_f horizontal bars.
@@ -146,6 +150,14 @@ def stabilization_diagram(diagram, ax=None, *, y=None, spectrum=None, selected=N
         frequency_range = (diagram.result_settings or {}).get("frequency_range")
     lo, hi = (0.0, diagram.fs / 2) if frequency_range is None else map(float, frequency_range)
     ax.set_xlim(lo, hi)
+    if spec_ax is not None:
+        # A useful dynamic range: six decades below the largest value in the shown band (a
+        # spectrum over 20 decades leaves the peaks as a flat line).
+        shown = (freq[1:] >= lo) & (freq[1:] <= hi)
+        if shown.any():
+            top = float(np.max(sv[1:][shown]))
+            if top > 0:
+                spec_ax.set_ylim(max(float(np.min(sv[1:][shown])), top * SPECTRUM_DECADES_FLOOR), top * 2.0)
     if diagram.orders:
         ax.set_ylim(0, max(diagram.orders) * 1.04 + 1)
     ax.set_xlabel("frequency [Hz]")

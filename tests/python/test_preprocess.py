@@ -164,3 +164,11 @@ def test_cli_bad_band_exits_2_naming_it(tmp_path, capsys):
     rc = main(["identify", str(path), "--frequency-range", "5", "40", "--no-progress"])
     err = capsys.readouterr().err
     assert rc == 2 and "frequency_range" in err
+
+
+@pytest.mark.skipif(not (DATA / "koma_shearframe_sim.npz").exists(), reason="shared records not present")
+def test_koma_frame_with_only_fs_and_a_band_finds_its_five_modes():
+    d = np.load(DATA / "koma_shearframe_sim.npz")
+    r = modaluq.identify(d["y"], fs=float(d["fs"]), frequency_range=(0.1, 1.5))
+    sel = r.stabilization_diagram().select_modes()
+    np.testing.assert_allclose(sel.frequency_hz, d["fn_ref_discrete_hz"], rtol=0.01)  # five, none spurious
