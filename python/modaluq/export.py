@@ -135,7 +135,7 @@ def report(diagram, selected, *, stamp: dict | None = None, extra: dict | None =
     sel = selected.to_dict()
     out["clustering"] = {k: sel[k] for k in ("clustering", "min_cluster_size", "dropped_clusters")}
     out["units"] = {"frequency_hz": "Hz", "damping_ratio": "fraction (0.02 = 2 %)",
-                    "std": "one analytic (delta-method) standard deviation at the representative order",
+                    "std": "analytic (delta-method) standard deviation, median over the poles of the mode's cluster that are not noise-coupled and not at a close cut",
                     "spread": "sample standard deviation across the poles of the mode's cluster",
                     "mode_shape": "normalised: largest-modulus component = 1"}
     out["modes"] = sel["modes"]

@@ -698,7 +698,7 @@ class SelectedModes:
         return "\n".join(lines)
 
     def __str__(self) -> str:
-        s = f"{self.n_modes} modes (std: analytic at the representative order; spread: across the cluster)\n"
+        s = f"{self.n_modes} modes (std: analytic, median over the cluster; spread: across the cluster)\n"
         s += self.table()
         if self.dropped_n_poles.size:
             s += (f"\n{self.dropped_n_poles.size} cluster(s) with fewer than {self.min_cluster_size} "
@@ -743,7 +743,13 @@ def select_modes(diagram: Diagram, settings: ClusteringSettings | None = None, *
     6. the representative of a cluster is its member nearest to the cluster's median frequency
        among the members at orders that do **not** cut close singular values (whose σ are
        meaningful), or among all members when every member's order does; ties go to the higher
-       order.
+       order. Its frequency, damping ratio and shape are reported; the ``frequency_std`` and
+       ``damping_std`` reported are the **median over the cluster's reliable poles** (not at
+       a close cut, not noise-coupled), so that they do not depend on the order the mode is
+       read at; the ``*_spread`` beside them is how much the estimate moves with the order.
+
+    Noise-coupled poles (``Diagram.noise_coupled``, docs/uq-math.md §5.5) are clustered (a weak
+    physical mode below the noise floor has them at every order) but never give the σ.
 
     Parameters
     ----------
@@ -816,6 +822,8 @@ def select_modes(diagram: Diagram, settings: ClusteringSettings | None = None, *
     sh_spread_r = np.zeros((n_out, n_modes))
     sh_spread_i = np.zeros((n_out, n_modes))
     min_mac = np.zeros(n_modes)
+    sf_med = np.full(n_modes, np.nan)
+    sxi_med = np.full(n_modes, np.nan)
     mode_of_pole = np.full(diagram.n_poles, -1, dtype=np.int64)
     for k, members in enumerate(kept):
         mode_of_pole[members] = k
@@ -827,6 +835,15 @@ def select_modes(diagram: Diagram, settings: ClusteringSettings | None = None, *
         # nearest to the median; ties -> higher order (candidates ascend in order, take last)
         gap = np.abs(f[candidates] - med)
         rep[k] = candidates[np.flatnonzero(gap == gap.min())[-1]]
+        # σ robust to the order it is read at: the median over the cluster's reliable poles
+        # (the representative's own σ is that of one order, which above the true order varies)
+        reliable = members[~(diagram.close_singular_values[members] | diagram.noise_coupled[members])
+                           & np.isfinite(diagram.frequency_std[members])]
+        if reliable.size:
+            sf_med[k] = np.median(diagram.frequency_std[reliable])
+            sxi_med[k] = np.median(diagram.damping_std[reliable])
+        else:
+            sf_med[k], sxi_med[k] = diagram.frequency_std[rep[k]], diagram.damping_std[rep[k]]
         ddof = 1 if members.size > 1 else 0
         f_spread[k] = np.std(f[members], ddof=ddof)
         xi_spread[k] = np.std(xi[members], ddof=ddof)
@@ -841,7 +858,7 @@ def select_modes(diagram: Diagram, settings: ClusteringSettings | None = None, *
 
     return SelectedModes(
         frequency_hz=f[rep], damping_ratio=xi[rep], mode_shape=shape[:, rep],
-        frequency_std=diagram.frequency_std[rep], damping_std=diagram.damping_std[rep],
+        frequency_std=sf_med, damping_std=sxi_med,
         mode_shape_std_real=diagram.mode_shape_std_real[:, rep],
         mode_shape_std_imag=diagram.mode_shape_std_imag[:, rep],
         frequency_spread=f_spread, damping_spread=xi_spread,
