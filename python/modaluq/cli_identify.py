@@ -207,7 +207,9 @@ def run(args) -> int:
             min_mac=args.min_mac,
             frequency_std_factor=None if args.frequency_std_factor == 0 else args.frequency_std_factor,
             max_frequency_cov=None if args.max_frequency_cov == 0 else args.max_frequency_cov,
-            max_damping_ratio=args.max_damping_ratio)
+            max_damping_ratio=args.max_damping_ratio,
+            damping_std_factor=None if args.damping_std_factor == 0 else args.damping_std_factor,
+            match_window=args.match_window)
         clustering = ClusteringSettings(distance_threshold=args.distance_threshold,
                                         min_cluster_size=args.min_cluster_size)
     except ValueError as exc:  # "min_mac must be ..." -> "--min-mac must be ..."
@@ -435,6 +437,12 @@ def register(subparsers) -> argparse.ArgumentParser:
     g.add_argument("--max-damping-change", type=float, default=0.10, metavar="FRAC",
                    help="largest relative damping change between orders (default 0.10)")
     g.add_argument("--min-mac", type=float, default=0.98, help="smallest MAC between orders (default 0.98)")
+    g.add_argument("--damping-std-factor", type=float, default=0.0, metavar="K",
+                   help="judge a damping change between orders against K x its combined std instead of "
+                        "--max-damping-change (default 0: the relative test)")
+    g.add_argument("--match-window", type=float, default=0.05, metavar="FRAC",
+                   help="a pole is compared only with poles of the previous order within this relative "
+                        "frequency distance (default 0.05)")
     g.add_argument("--frequency-std-factor", type=float, default=2.0, metavar="K",
                    help="|df| <= K sqrt(std1^2 + std2^2) between orders (default 2; 0 switches it off)")
     g.add_argument("--max-frequency-cov", type=float, default=0.02, metavar="FRAC",

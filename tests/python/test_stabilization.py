@@ -148,10 +148,10 @@ def test_frequency_change_judged_against_its_standard_deviation(sigma, k, expect
 
 
 def test_damping_change_threshold_gives_stable_frequency():
-    # ξ 0.02 -> 0.025 is a 25 % change (> 10 %); 0.02 -> 0.021 is 5 % (<= 10 %).
+    # Without the σ test: ξ 0.02 -> 0.025 is a 25 % change (> 10 %); 0.02 -> 0.021 is 5 % (<= 10 %).
     d = stabilization_diagram(make_result({
         4: [pole(10.0), pole(20.0, shape=SHAPE_B)],
-        6: [pole(10.0, xi=0.025), pole(20.0, xi=0.021, shape=SHAPE_B)]}))
+        6: [pole(10.0, xi=0.025), pole(20.0, xi=0.021, shape=SHAPE_B)]}), damping_std_factor=None)
     s, reason, i = status_of(d, 6, 10.0)
     assert s is PoleStatus.STABLE_FREQUENCY and "damping change 25 % > 10 %" in reason
     assert d.damping_change[i] == pytest.approx(0.25)
@@ -412,3 +412,26 @@ def test_noise_coupled_poles_are_a_column_and_never_the_representative():
     for k in range(2):
         assert not flagged[sel.representative_pole[k]]
         assert d.order[sel.representative_pole[k]] not in (12, 14, 16)
+
+
+def test_damping_change_is_judged_against_its_combined_std():
+    """σ_ξ = 50 % of ξ: a 25 % change is noise (stable); a change beyond 2 combined σ, or beyond
+    the loose backstop of 50 %, is not."""
+    d = stabilization_diagram(make_result({
+        4: [pole(10.0, sxi=0.01), pole(20.0, shape=SHAPE_B, sxi=0.01), pole(30.0, shape=SHAPE_C, sxi=0.001)],
+        6: [pole(10.0, xi=0.025, sxi=0.0125), pole(20.0, xi=0.035, shape=SHAPE_B, sxi=0.02),
+            pole(30.0, xi=0.025, shape=SHAPE_C, sxi=0.001)]}), damping_std_factor=2.0)
+    assert status_of(d, 6, 10.0)[0] is PoleStatus.STABLE                     # 0.005 < 2 x 0.016
+    s, reason, _ = status_of(d, 6, 20.0)                                      # 75 % > 50 % backstop
+    assert s is PoleStatus.STABLE_FREQUENCY and "damping change 75 % > 50 %" in reason
+    s, reason, _ = status_of(d, 6, 30.0)                                      # 0.005 > 2 x 0.0014
+    assert s is PoleStatus.STABLE_FREQUENCY and "x combined std" in reason
+
+
+def test_a_pole_matches_only_a_pole_within_the_window():
+    """No pairing of a 3.3 Hz pole with a 27 Hz one: beyond match_window it is 'no match'."""
+    d = stabilization_diagram(make_result({4: [pole(27.0)], 6: [pole(3.3), pole(27.0)]}))
+    s, reason, i = status_of(d, 6, 3.3)
+    assert s is PoleStatus.UNSTABLE and reason.startswith("no match: no pole within 5 %")
+    assert d.matched_pole[i] == -1
+    assert status_of(d, 6, 27.0)[0] is PoleStatus.STABLE
