@@ -50,6 +50,8 @@ def _axes(ax, figsize):
     return ax.figure, ax
 
 
+#: Mode shapes of more channels than this are drawn as horizontal bars, one labelled row per channel.
+HORIZONTAL_SHAPES_ABOVE = 6
 #: The spectrum behind a diagram is drawn down to this fraction of its largest value in the band.
 SPECTRUM_DECADES_FLOOR = 1e-6
 
@@ -211,8 +213,14 @@ def mode_shapes(modes, fig=None, *, channel_positions=None, ncols=3, figsize=Non
             raise ValueError(f"channel_positions must have {n_out} entries; got shape {x.shape}")
     ncols = max(1, min(_integer("ncols", ncols, minimum=1), n_modes))
     nrows = max(1, -(-n_modes // ncols))
+    # Many channels: horizontal bars, one labelled row per channel (names side by side overlap).
+    horizontal = n_out > HORIZONTAL_SHAPES_ABOVE
     if figsize is None:
-        figsize = (3.4 * ncols, 2.6 * nrows + 0.3)
+        if horizontal:
+            label_in = 0.07 * max(len(str(nm)) for nm in names)
+            figsize = (2.6 * ncols + label_in + 0.6, (0.19 * n_out + 0.7) * nrows + 0.3)
+        else:
+            figsize = (3.4 * ncols, 2.6 * nrows + 0.3)
     if fig is None:
         fig = StandaloneFigure(figsize=figsize, layout="constrained")
     else:
@@ -220,19 +228,29 @@ def mode_shapes(modes, fig=None, *, channel_positions=None, ncols=3, figsize=Non
     if n_modes == 0:
         fig.text(0.5, 0.5, "no modes", ha="center", va="center")
         return fig
-    axes = fig.subplots(nrows, ncols, squeeze=False, sharey=True)
+    axes = fig.subplots(nrows, ncols, squeeze=False, sharey=True, sharex=horizontal)
     spacing = np.min(np.diff(np.sort(x))) if n_out > 1 else 1.0
     w = 0.38 * spacing
+    long_names = max(len(str(nm)) for nm in names) > 4 and n_out > 3
     for i in range(n_modes):
         ax = axes.flat[i]
         err_r = None if sr is None else np.nan_to_num(np.asarray(sr)[:, i])
         err_i = None if si is None else np.nan_to_num(np.asarray(si)[:, i])
-        ax.bar(x - w / 2, shape[:, i].real, w, yerr=err_r, color="tab:blue", capsize=2,
-               error_kw={"lw": 0.8}, label="real")
-        ax.bar(x + w / 2, shape[:, i].imag, w, yerr=err_i, color="tab:orange", capsize=2,
-               error_kw={"lw": 0.8}, label="imag")
-        ax.axhline(0, color="k", lw=0.5)
-        ax.set_xticks(x, names, fontsize=8)
+        if horizontal:
+            ax.barh(x - w / 2, shape[:, i].real, w, xerr=err_r, color="tab:blue", capsize=1.5,
+                    error_kw={"lw": 0.7}, label="real")
+            ax.barh(x + w / 2, shape[:, i].imag, w, xerr=err_i, color="tab:orange", capsize=1.5,
+                    error_kw={"lw": 0.7}, label="imag")
+            ax.axvline(0, color="k", lw=0.5)
+            ax.set_yticks(x, names, fontsize=7)
+            ax.grid(True, axis="x", alpha=0.3)
+        else:
+            ax.bar(x - w / 2, shape[:, i].real, w, yerr=err_r, color="tab:blue", capsize=2,
+                   error_kw={"lw": 0.8}, label="real")
+            ax.bar(x + w / 2, shape[:, i].imag, w, yerr=err_i, color="tab:orange", capsize=2,
+                   error_kw={"lw": 0.8}, label="imag")
+            ax.axhline(0, color="k", lw=0.5)
+            ax.set_xticks(x, names, fontsize=8, rotation=90 if long_names else 0)
         f, xi = modes.frequency_hz[i], modes.damping_ratio[i]
         if sf is not None and np.isfinite(np.asarray(sf)[i]):
             t = f"{f:.4g} ± {np.asarray(sf)[i]:.2g} Hz, ξ {100 * xi:.3g} ± {100 * np.asarray(sx)[i]:.2g} %"
@@ -241,7 +259,13 @@ def mode_shapes(modes, fig=None, *, channel_positions=None, ncols=3, figsize=Non
         ax.set_title(f"mode {i + 1}: {t}", fontsize=8)
     for ax in list(axes.flat)[n_modes:]:
         ax.set_visible(False)
-    axes.flat[0].set_ylim(-1.15, 1.15)
-    axes.flat[0].legend(fontsize=7, loc="lower left")
-    fig.supylabel("mode shape (±1σ)", fontsize=9)
+    if horizontal:
+        axes.flat[0].set_xlim(-1.15, 1.15)
+        axes.flat[0].invert_yaxis()  # first channel on top, as in a table
+        axes.flat[0].legend(fontsize=7, loc="lower right")
+        fig.supxlabel("mode shape (±1σ)", fontsize=9)
+    else:
+        axes.flat[0].set_ylim(-1.15, 1.15)
+        axes.flat[0].legend(fontsize=7, loc="lower left")
+        fig.supylabel("mode shape (±1σ)", fontsize=9)
     return fig

@@ -209,3 +209,23 @@ def test_noise_coupled_poles_are_ringed_without_a_bar():
         mask = d.is_status(status)
         widths = np.ptp(np.array(c.lines[2][0].get_segments())[:, :, 0], axis=1)
         assert np.all(widths[d.noise_coupled[mask]] == 0)
+
+
+def test_many_channels_get_horizontal_bars_with_one_readable_label_each():
+    from types import SimpleNamespace
+
+    n_out = 19
+    names = tuple(f"sta{k:02d}|Up|Deck: Middle of North Span" for k in range(n_out))
+    rng = np.random.default_rng(0)
+    shape = rng.standard_normal((n_out, 2)) + 0.01j * rng.standard_normal((n_out, 2))
+    modes = SimpleNamespace(mode_shape=shape / np.abs(shape).max(axis=0), frequency_hz=np.array([3.1, 4.5]),
+                            damping_ratio=np.array([0.02, 0.01]), output_names=names,
+                            mode_shape_std_real=np.full((n_out, 2), 0.02), mode_shape_std_imag=np.full((n_out, 2), 0.01))
+    fig = mode_shapes(modes)
+    ax = fig.axes[0]
+    assert [t.get_text() for t in ax.get_yticklabels()] == list(names)   # one label per channel, on the y axis
+    assert ax.get_xlim() == (-1.15, 1.15)
+    width, height = fig.get_size_inches()
+    assert height >= 0.19 * n_out                                          # rows do not overlap
+    bars = [p for p in ax.patches]
+    assert len(bars) == 2 * n_out
