@@ -270,7 +270,9 @@ def run(args) -> int:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             try:
-                result = identify(y, u, fs=pre.fs, block_rows=block_rows,
+                # block_rows None: identify chooses the same value from the same samples, and
+                # records why (a chosen value is not warned about as if the user had set it)
+                result = identify(y, u, fs=pre.fs, block_rows=args.block_rows,
                                   past_block_rows=args.past_block_rows, orders=orders,
                                   n_blocks=args.n_blocks, references=refs,
                                   uncertainty=not args.no_uncertainty, frequency_range=pre.frequency_range,
@@ -279,10 +281,9 @@ def run(args) -> int:
                 raise _CliError(f"numerical failure in the identification: {exc}") from None
         # what was done to the file's samples (identify saw them already processed)
         result.settings["preprocessing"] = pre.settings()
-        if args.block_rows is None:
-            result.settings.setdefault("chosen", []).insert(0, choose_settings(
-                pre.n_samples, pre.fs, len(out_idx), frequency_range=pre.frequency_range,
-                n_references=len(refs) if refs else None, orders=(2,), n_blocks=2).reasons[0])
+        if result.settings["block_rows"] != block_rows:  # the same rule on the same samples
+            raise RuntimeError(f"block_rows chosen twice differently: {block_rows} and "
+                               f"{result.settings['block_rows']}")
         progress.update()
 
         progress.set_description_str("stabilization diagram")

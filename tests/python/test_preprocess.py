@@ -172,3 +172,17 @@ def test_koma_frame_with_only_fs_and_a_band_finds_its_five_modes():
     r = modaluq.identify(d["y"], fs=float(d["fs"]), frequency_range=(0.1, 1.5))
     sel = r.stabilization_diagram().select_modes()
     np.testing.assert_allclose(sel.frequency_hz, d["fn_ref_discrete_hz"], rtol=0.01)  # five, none spurious
+
+
+def test_cli_does_not_warn_about_lags_it_chose_itself(tmp_path, capsys):
+    """8 outputs cap the automatic horizon below one period of f_low: the reason says so, and no
+    warning calls the tool's own choice wrong; a user's too-short block_rows is warned about."""
+    rng = np.random.default_rng(5)
+    path = tmp_path / "rec.npz"
+    np.savez(path, y=rng.standard_normal((18_000, 8)), fs=30.0)
+    assert main(["identify", str(path), "--frequency-range", "0.2", "5", "--no-progress", "--orders", "2:20:2"]) == 0
+    captured = capsys.readouterr()
+    assert "H is capped at 300 rows" in captured.out and "gives lags of" not in captured.err
+    assert main(["identify", str(path), "--frequency-range", "0.2", "5", "--no-progress", "--block-rows", "10",
+                 "--orders", "2:20:2"]) == 0
+    assert "block_rows = 10 gives lags of" in capsys.readouterr().err
