@@ -195,6 +195,7 @@ def run(args) -> int:
     from .auto_settings import choose_settings
     from .identification import identify
     from .io import load
+    from .harmonics import harmonic_kurtosis, possible_harmonics
     from .preprocess import preprocess
     from .stabilization import (ClusteringSettings, PoleStatus, StabilityCriteria, select_modes,
                                  stabilization_diagram)
@@ -291,6 +292,10 @@ def run(args) -> int:
         progress.update()
         progress.set_description_str("clustering")
         selected = select_modes(diagram, clustering)
+        # rotating machinery: kurtosis of the response filtered around each mode (harmonics.py)
+        kurt = harmonic_kurtosis(y, pre.fs, selected.frequency_hz) if selected.n_modes else np.zeros(0)
+        harmonic = (possible_harmonics(y, pre.fs, selected.frequency_hz, selected.damping_ratio)
+                    if selected.n_modes else np.zeros(0, bool))
         progress.update()
 
         # ------------------------------------------------------------------ plots
@@ -307,10 +312,7 @@ def run(args) -> int:
             progress.update()
         if args.plot_shapes and selected.n_modes:
             progress.set_description_str("plotting the mode shapes")
-            ncols = min(3, selected.n_modes)
-            nrows = -(-selected.n_modes // ncols)
-            fig = Figure(figsize=(3.4 * ncols, 2.6 * nrows + 0.3), layout="constrained")
-            selected.plot(fig=fig)
+            fig = selected.plot()  # sized by the plot module (horizontal bars for many channels)
             fig.savefig(args.plot_shapes, dpi=args.dpi)
             written.append(args.plot_shapes)
             progress.update()
@@ -328,7 +330,9 @@ def run(args) -> int:
             })
             extra = {"input": {"n_samples": rec.n_samples, "fs_hz": rec.fs, "outputs": out_names,
                                "inputs": in_names, "source": rec.source},
-                     "warnings": [str(w.message) for w in caught]}
+                     "warnings": [str(w.message) for w in caught],
+                     "possible_harmonics": [{"mode": k + 1, "frequency_hz": float(selected.frequency_hz[k]),
+                                             "kurtosis": float(kurt[k])} for k in np.flatnonzero(harmonic)]}
             for p in args.out:
                 progress.set_description_str(f"writing {Path(p).name}")
                 try:
@@ -367,6 +371,10 @@ def run(args) -> int:
     print()
     if selected.n_modes:
         print(selected)
+        for k in np.flatnonzero(harmonic):
+            print(f"mode {k + 1} ({selected.frequency_hz[k]:.4g} Hz, xi {100 * selected.damping_ratio[k]:.2g} %) may be "
+                  f"a harmonic of the excitation, not a structural mode: its filtered response has kurtosis "
+                  f"{kurt[k]:.2f} (a sinusoid 1.5, a random mode 3; docs/settings.md)")
     else:
         print("no mode selected: no cluster of stable poles reached "
               f"{selected.min_cluster_size} poles (try more orders, a longer record or looser criteria)")
