@@ -143,14 +143,19 @@ def stabilization_diagram(diagram, ax=None, *, y=None, spectrum=None, selected=N
     if coupled.any():
         ax.plot(diagram.frequency_hz[coupled], diagram.order[coupled], "o", mfc="none", mec="k", ms=8, mew=0.8,
                 zorder=4, label=f"noise-coupled: no first-order σ ({int(coupled.sum())})")
-    if selected is not None:
-        for k, fk in enumerate(selected.frequency_hz):
-            ax.axvline(fk, color="k", ls=":", lw=0.8, zorder=2)
-            ax.annotate(str(k + 1), (fk, 1.0), xycoords=("data", "axes fraction"), xytext=(0, 2),
-                        textcoords="offset points", ha="center", va="bottom", fontsize=8)
     if frequency_range is None:  # the band the identification was given, else 0 to fs/2
         frequency_range = (diagram.result_settings or {}).get("frequency_range")
     lo, hi = (0.0, diagram.fs / 2) if frequency_range is None else map(float, frequency_range)
+    if selected is not None:
+        # Mode numbers on top; a number closer than 2 % of the axis to the previous one is
+        # raised a line, so that close modes (a tower's bending pair) stay readable.
+        last_x, raised = -np.inf, False
+        for k, fk in enumerate(selected.frequency_hz):
+            ax.axvline(fk, color="k", ls=":", lw=0.8, zorder=2)
+            raised = (fk - last_x) < 0.02 * (hi - lo) and not raised
+            last_x = fk
+            ax.annotate(str(k + 1), (fk, 1.0), xycoords=("data", "axes fraction"), xytext=(0, 11 if raised else 2),
+                        textcoords="offset points", ha="center", va="bottom", fontsize=8)
     ax.set_xlim(lo, hi)
     if spec_ax is not None:
         # A useful dynamic range: six decades below the largest value in the shown band (a
@@ -165,7 +170,7 @@ def stabilization_diagram(diagram, ax=None, *, y=None, spectrum=None, selected=N
     ax.set_xlabel("frequency [Hz]")
     ax.set_ylabel("model order")
     kind = "±1σ bars" if diagram.has_uncertainty else "no uncertainty"
-    ax.set_title(f"Stabilization diagram ({kind})", fontsize=10, pad=14 if selected is not None else 6)
+    ax.set_title(f"Stabilization diagram ({kind})", fontsize=10, pad=23 if selected is not None else 6)
     if handles:
         ax.legend(loc="lower right", fontsize=8, framealpha=0.85)
     return fig
