@@ -376,8 +376,17 @@ def run(args) -> int:
                   f"a harmonic of the excitation, not a structural mode: its filtered response has kurtosis "
                   f"{kurt[k]:.2f} (a sinusoid 1.5, a random mode 3; docs/settings.md)")
     else:
-        print("no mode selected: no cluster of stable poles reached "
-              f"{selected.min_cluster_size} poles (try more orders, a longer record or looser criteria)")
+        print("no mode selected: no cluster of stable poles both reached "
+              f"{selected.min_cluster_size} poles and had a frequency std within its bandwidth "
+              "(try more orders, a longer record, a narrower band or looser criteria)")
+    # the largest dropped clusters, with why: what a person checks against the diagram
+    dropped = sorted(zip(selected.dropped_n_poles, selected.dropped_frequency_hz, selected.dropped_reason),
+                     key=lambda t: (-t[0], t[1]))
+    shown = [d for d in dropped if d[0] >= max(3, selected.min_cluster_size // 2) or "bandwidth" in d[2]][:8]
+    if shown:
+        print(f"dropped clusters ({len(dropped)} in all; the largest):")
+        for n, f, why in sorted(shown, key=lambda t: t[1]):
+            print(f"  {f:.4g} Hz: {why}")
     for p in written:
         print(f"wrote {p}")
     print(f"({time.perf_counter() - t_start:.1f} s)")

@@ -153,9 +153,7 @@ def write_json(path, diagram, selected, *, stamp: dict | None = None, extra: dic
 def write_csv(path, selected) -> Path:
     """Write the selected modes (one row each, with σ and spread) as CSV; return the path."""
     path = Path(path)
-    df = selected.to_dataframe()
-    df.insert(0, "mode", np.arange(1, len(df) + 1))
-    df.to_csv(path, index=False)
+    selected.to_dataframe().to_csv(path, index=True)  # the index is the mode number, from 1
     return path
 
 

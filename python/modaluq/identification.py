@@ -127,8 +127,9 @@ class Modes:
     def __len__(self) -> int:
         return self.n_modes
 
-    def to_dataframe(self):
-        """One row per mode: frequency, damping and (when computed) their standard deviations."""
+    def to_dataframe(self, output_names=None):
+        """One row per mode (numbered from 1): frequency, damping and (when computed) their
+        standard deviations, and the shape in columns ``mode_shape_<channel>``."""
         import pandas as pd
 
         data = {
@@ -139,9 +140,11 @@ class Modes:
         if self.has_uncertainty:
             data["frequency_std"] = self.frequency_std
             data["damping_std"] = self.damping_std
-        for k in range(self.mode_shape.shape[0]):
-            data[f"mode_shape_{k}"] = self.mode_shape[k]
-        return pd.DataFrame(data, index=pd.RangeIndex(self.n_modes, name="mode"))
+        l = self.mode_shape.shape[0]
+        names = tuple(output_names) if output_names is not None else tuple(f"y{k}" for k in range(l))
+        for k in range(l):
+            data[f"mode_shape_{names[k]}"] = self.mode_shape[k]
+        return pd.DataFrame(data, index=pd.RangeIndex(1, self.n_modes + 1, name="mode"))
 
     def table(self) -> str:
         """The modes as a plain-text table (frequency in Hz, damping in %)."""
@@ -198,6 +201,7 @@ class Result:
     #: an estimate of the model order (0 without uncertainty)
     significant_singular_values: int = 0
     warnings: tuple = field(default_factory=tuple)
+    output_names: tuple = ()          #: one name per output channel (default y0, y1, ...)
 
     @property
     def orders(self) -> tuple:
@@ -220,7 +224,7 @@ class Result:
         """Every pole of every order, one row each (long format: order, mode, f, xi, std...)."""
         import pandas as pd
 
-        frames = [m.to_dataframe().reset_index() for m in self.modes if m.n_modes]
+        frames = [m.to_dataframe(self.output_names or None).reset_index() for m in self.modes if m.n_modes]
         if not frames:
             return pd.DataFrame(columns=["order", "mode", "frequency_hz", "damping_ratio"])
         return pd.concat(frames, ignore_index=True)
@@ -291,8 +295,9 @@ class Result:
                 f"n_samples={self.n_samples}, n_outputs={self.n_outputs}, n_inputs={self.n_inputs})")
 
 
-def _result_from_core(ident, settings, n_outputs, n_inputs, extra_warnings=()) -> Result:
+def _result_from_core(ident, settings, n_outputs, n_inputs, extra_warnings=(), output_names=()) -> Result:
     return Result(
+        output_names=tuple(output_names) or tuple(f"y{k}" for k in range(n_outputs)),
         modes=tuple(Modes._from_core(m) for m in ident.modes),
         fs=settings["fs"],
         settings=settings,
@@ -344,7 +349,7 @@ def identify(y, u=None, *, fs: float, block_rows: int | None = None, past_block_
              input_rcond: float = 1e-10, threads: int = 1, freeze_noise: bool = True,
              noise_coupling_limit: float = 20.0, frequency_range=None, start: float | None = None,
              stop: float | None = None, decimate: int | None = None, detrend: str | None = None,
-             highpass: float | None = None) -> Result:
+             highpass: float | None = None, output_names: Sequence[str] | None = None) -> Result:
     """Identify modes by covariance-driven SSI, with their standard deviations.
 
     Parameters
@@ -410,6 +415,9 @@ def identify(y, u=None, *, fs: float, block_rows: int | None = None, past_block_
         Detrend each channel before filtering.
     highpass : float, optional
         Corner in Hz of a zero-phase 4th-order Butterworth high-pass applied to y and u.
+    output_names : sequence of str, optional
+        One name per output channel, used by tables, plots and exports. Default: the columns of
+        ``y`` when it is a :class:`pandas.DataFrame`, else ``y0, y1, ...``.
 
     Returns
     -------
@@ -427,7 +435,10 @@ def identify(y, u=None, *, fs: float, block_rows: int | None = None, past_block_
     [1.9, 5.6, 8.7, 14.5, 15.8, 17.0]
     """
     fs = _sampling_frequency(fs)
+    names = _output_names(output_names, y)
     y = as_samples(y, "y")
+    if len(names) not in (0, y.shape[1]):
+        raise ValueError(f"output_names must have {y.shape[1]} entries (one per column of y); got {len(names)}")
     u = as_samples(u, "u", allow_none=True)
     if u is not None and u.shape[0] != y.shape[0]:
         raise ValueError(f"u must have as many samples as y ({y.shape[0]}); got {u.shape[0]}")
@@ -461,6 +472,17 @@ def identify(y, u=None, *, fs: float, block_rows: int | None = None, past_block_
         lag = lag_warning(o.block_rows, o.fs, band)
         if lag:
             extra.append(lag)
-    result = _result_from_core(ident, settings, y.shape[1], 0 if u is None else u.shape[1], extra_warnings=extra)
+    result = _result_from_core(ident, settings, y.shape[1], 0 if u is None else u.shape[1], extra_warnings=extra,
+                               output_names=names)
     _warn(result)
     return result
+
+
+def _output_names(output_names, y) -> tuple:
+    """The names given, else a DataFrame's columns, else () (meaning y0, y1, ...)."""
+    if output_names is not None:
+        if isinstance(output_names, str):
+            raise TypeError("output_names must be a sequence of names, one per output; got a single string")
+        return tuple(str(n) for n in output_names)
+    columns = getattr(y, "columns", None)
+    return tuple(str(c) for c in columns) if columns is not None and getattr(y, "ndim", 0) == 2 else ()

@@ -12,13 +12,19 @@ with nearly the same parameters; spurious (noise, numerical) poles come and go. 
    gets a :class:`PoleStatus` and, unless stable, a ``reason`` saying which test failed and by
    how much;
 2. **groups the stable poles into physical modes** (:func:`select_modes`) by agglomerative
-   hierarchical clustering (:func:`scipy.cluster.hierarchy.linkage`, average linkage) on the
-   distance ``|f_i - f_j| / max(f_i, f_j) + (1 - MAC_ij)``, cut at ``distance_threshold``;
-   clusters with fewer than ``min_cluster_size`` members are dropped (and listed), and each
-   remaining cluster is reported at one representative pole with its analytic standard
-   deviations, next to the spread (sample standard deviation) of its members.
+   hierarchical clustering (average linkage) on the distance
+   ``|f_i - f_j| / max(f_i, f_j) + (1 - MAC_ij)``, cut at ``distance_threshold``; clusters with
+   fewer than ``min_cluster_size`` members, or whose frequency is less certain than the
+   half-power bandwidth of the peak they claim, are dropped (and listed with the reason), and
+   each remaining cluster is reported at one representative pole, with the median analytic
+   standard deviation of its reliable poles next to the spread of its members.
 
-Everything is deterministic: no random initialisation, ties broken by order and index.
+Both steps run in the C++ core (``cpp/include/modaluq/stabilization.hpp`` and ``selection.hpp``),
+so C++ software embedding the core gets the same diagram and the same modes; this module
+translates the results into :class:`Diagram` and :class:`SelectedModes` (tables, exports,
+plots). ``tests/python/test_stabilization_core.py`` checks the core against an independent
+NumPy/SciPy implementation. Everything is deterministic: no random initialisation, ties broken
+by order and index.
 
 >>> import modaluq
 >>> sim = modaluq.simulate(50_000, seed=2)
@@ -37,6 +43,7 @@ from dataclasses import dataclass, field, fields
 
 import numpy as np
 
+from . import _core
 from .identification import _integer, _real
 
 __all__ = [
@@ -74,6 +81,14 @@ class PoleStatus(str, enum.Enum):
 
     def __str__(self) -> str:  # "stable", not "PoleStatus.STABLE"
         return self.value
+
+
+#: the core's status (stabilization.hpp) -> PoleStatus, and back
+_STATUS_OF_CORE = {
+    _core.PoleStatus.stable: PoleStatus.STABLE, _core.PoleStatus.stable_frequency: PoleStatus.STABLE_FREQUENCY,
+    _core.PoleStatus.unstable: PoleStatus.UNSTABLE, _core.PoleStatus.rejected: PoleStatus.REJECTED,
+}
+_CORE_OF_STATUS = {v: k for k, v in _STATUS_OF_CORE.items()}
 
 
 # --------------------------------------------------------------------------- helpers
@@ -115,10 +130,6 @@ def modal_assurance_criterion(shape_a, shape_b) -> np.ndarray:
     with np.errstate(invalid="ignore", divide="ignore"):
         mac = np.where(denom > 0, cross / np.where(denom > 0, denom, 1.0), 0.0)
     return np.clip(mac, 0.0, 1.0)
-
-
-def _pct(x: float) -> str:
-    return f"{100 * x:.3g} %"
 
 
 # --------------------------------------------------------------------------- criteria
@@ -212,6 +223,13 @@ class StabilityCriteria:
     def to_dict(self) -> dict:
         return {f.name: getattr(self, f.name) for f in fields(self)}
 
+    def _to_core(self):
+        c = _core.StabilityCriteria()
+        for f in fields(self):
+            value = getattr(self, f.name)
+            setattr(c, f.name, None if value is None else float(value))
+        return c
+
 
 @dataclass(frozen=True)
 class ClusteringSettings:
@@ -233,16 +251,29 @@ class ClusteringSettings:
         stable over more than a few consecutive orders, while a physical mode can lose
         stability over a range of orders where a spurious pole splits it (seen with few sensors
         at orders far above the true one), so a higher fraction drops real modes.
+    per_cluster_min_size : bool
+        With ``min_cluster_size=None``, count the orders from each cluster's own lowest order
+        (True: a mode that first appears at a high order needs fewer poles) instead of from the
+        lowest order of any clustered pole (False, default).
+    max_frequency_std_per_bandwidth : float or None
+        Clusters whose median ``σ_f / (f ξ)`` exceeds this are dropped (default 1): the frequency
+        is then less certain than the half-power half-bandwidth ``f ξ`` of the peak the pole
+        claims. A structural mode identified from a record of ``T`` seconds has about
+        ``1 / sqrt(2π f T ξ)`` (0.05–0.4 on the shared records), while spurious poles, whose σ
+        the noise directions inflate, have 2–5. None switches it off; skipped without uncertainty.
     statuses : tuple of PoleStatus
         Which poles are clustered (default only ``STABLE``).
     linkage : str
-        Linkage method of :func:`scipy.cluster.hierarchy.linkage` (default ``"average"``;
-        ``"single"`` chains neighbouring poles, ``"complete"`` is stricter).
+        Linkage method (the clustering is the core's, selection.hpp; it equals
+        :func:`scipy.cluster.hierarchy.linkage` + ``fcluster``): default ``"average"``;
+        ``"single"`` chains neighbouring poles, ``"complete"`` is stricter, ``"weighted"`` is WPGMA.
     """
 
     distance_threshold: float = 0.02
     min_cluster_size: int | None = None
     min_cluster_fraction: float = 0.25
+    per_cluster_min_size: bool = False
+    max_frequency_std_per_bandwidth: float | None = 1.0
     statuses: tuple = (PoleStatus.STABLE,)
     linkage: str = "average"
 
@@ -251,6 +282,10 @@ class ClusteringSettings:
         if self.min_cluster_size is not None:
             _integer("min_cluster_size", self.min_cluster_size, minimum=1)
         _real("min_cluster_fraction", self.min_cluster_fraction, low=0, high=1, low_open=True)
+        _real("max_frequency_std_per_bandwidth", self.max_frequency_std_per_bandwidth, low=0, low_open=True,
+              allow_none=True)
+        if not isinstance(self.per_cluster_min_size, (bool, np.bool_)):
+            raise TypeError(f"per_cluster_min_size must be True or False; got {self.per_cluster_min_size!r}")
         if isinstance(self.statuses, (str, PoleStatus)):
             object.__setattr__(self, "statuses", (self.statuses,))
         try:
@@ -266,7 +301,21 @@ class ClusteringSettings:
     def to_dict(self) -> dict:
         return {"distance_threshold": self.distance_threshold, "min_cluster_size": self.min_cluster_size,
                 "min_cluster_fraction": self.min_cluster_fraction,
+                "per_cluster_min_size": bool(self.per_cluster_min_size),
+                "max_frequency_std_per_bandwidth": self.max_frequency_std_per_bandwidth,
                 "statuses": [s.value for s in self.statuses], "linkage": self.linkage}
+
+    def _to_core(self):
+        c = _core.ClusteringOptions()
+        c.distance_threshold = float(self.distance_threshold)
+        c.min_cluster_size = int(self.min_cluster_size or 0)
+        c.min_cluster_fraction = float(self.min_cluster_fraction)
+        c.per_cluster_min_size = bool(self.per_cluster_min_size)
+        c.max_frequency_std_per_bandwidth = (None if self.max_frequency_std_per_bandwidth is None
+                                             else float(self.max_frequency_std_per_bandwidth))
+        c.statuses = [_CORE_OF_STATUS[s] for s in self.statuses]
+        c.linkage = getattr(_core.Linkage, self.linkage)
+        return c
 
 
 # --------------------------------------------------------------------------- diagram
@@ -400,8 +449,9 @@ class Diagram:
         coords = {"pole": np.arange(self.n_poles), "channel": list(self.output_names)}
         if selected is not None:
             sel = selected
-            pole_vars["mode_of_pole"] = (("pole",), sel.mode_of_pole,
-                                         {"long_name": "selected mode of each pole (-1: none)"})
+            pole_vars["mode_of_pole"] = (("pole",), sel.mode_of_pole + 1,
+                                         {"long_name": "selected mode number of each pole (as the mode "
+                                                       "coordinate, from 1; 0: none)"})
             for name in ("frequency_hz", "damping_ratio", "frequency_std", "damping_std",
                          "frequency_spread", "damping_spread", "representative_order",
                          "representative_pole", "n_poles", "order_min", "order_max", "min_mac"):
@@ -412,7 +462,7 @@ class Diagram:
                                  ("mode_shape_spread_real", sel.mode_shape_spread_real),
                                  ("mode_shape_spread_imag", sel.mode_shape_spread_imag)):
                 pole_vars[f"selected_{name}"] = (("channel", "mode"), values, {})
-            coords["mode"] = np.arange(sel.n_modes)
+            coords["mode"] = np.arange(1, sel.n_modes + 1)  # numbered from 1, as in every table and plot
         ds = xr.Dataset({k: xr.Variable(d, v, a) for k, (d, v, a) in pole_vars.items()}, coords=coords)
         gattrs = {"fs_hz": self.fs, "criteria": json.dumps(self.criteria.to_dict()),
                   "identification_settings": json.dumps(self.result_settings, default=str)}
@@ -422,6 +472,26 @@ class Diagram:
             gattrs[k] = v if isinstance(v, (str, int, float)) else json.dumps(v, default=str)
         ds.attrs.update(gattrs)
         return ds
+
+    def _to_core(self):
+        """The core's Diagram (selection.hpp reads poles and statuses) from these arrays."""
+        p = _core.Poles()
+        p.order = np.asarray(self.order, np.int64)
+        p.frequency_hz = np.asarray(self.frequency_hz, float)
+        p.damping_ratio = np.asarray(self.damping_ratio, float)
+        p.frequency_std = np.asarray(self.frequency_std, float)
+        p.damping_std = np.asarray(self.damping_std, float)
+        p.mode_shape = np.asarray(self.mode_shape, complex)
+        p.mode_shape_std_real = np.asarray(self.mode_shape_std_real, float)
+        p.mode_shape_std_imag = np.asarray(self.mode_shape_std_imag, float)
+        p.close_singular_values = np.asarray(self.close_singular_values, bool)
+        p.noise_coupled = np.asarray(self.noise_coupled, bool)
+        p.orders = [int(n) for n in self.orders]
+        p.has_uncertainty = bool(self.has_uncertainty)
+        d = _core.Diagram()
+        d.poles = p
+        d.status = [_CORE_OF_STATUS[s] for s in self.status]
+        return d
 
     def select_modes(self, settings: ClusteringSettings | None = None, **kwargs) -> "SelectedModes":
         """Shorthand for :func:`select_modes` (``kwargs`` are fields of :class:`ClusteringSettings`)."""
@@ -444,19 +514,6 @@ class Diagram:
                 f"{self.n_poles} poles: {counts})")
 
 
-def _pole_checks(f, xi, sf, c: StabilityCriteria, has_std: bool) -> list:
-    reasons = []
-    if xi < c.min_damping_ratio:
-        reasons.append(f"damping ratio {_pct(xi)} < {_pct(c.min_damping_ratio)}")
-    if xi > c.max_damping_ratio:
-        reasons.append(f"damping ratio {_pct(xi)} > {_pct(c.max_damping_ratio)}")
-    if has_std and c.max_frequency_cov is not None:
-        if not np.isfinite(sf):
-            reasons.append("frequency std not finite")
-        elif sf / f > c.max_frequency_cov:
-            reasons.append(f"frequency std/f {_pct(sf / f)} > {_pct(c.max_frequency_cov)}")
-    return reasons
-
 
 def stabilization_diagram(result, criteria: StabilityCriteria | None = None, *,
                           output_names=None, **kwargs) -> Diagram:
@@ -470,7 +527,8 @@ def stabilization_diagram(result, criteria: StabilityCriteria | None = None, *,
         Thresholds; default ``StabilityCriteria()``. Alternatively pass its fields as keyword
         arguments (``max_frequency_change=0.02``...).
     output_names : sequence of str, optional
-        One name per output channel (default ``y0, y1, ...``), used in tables, plots and exports.
+        One name per output channel, used in tables, plots and exports (default
+        ``result.output_names``: the names given to :func:`modaluq.identify`, else ``y0, y1, ...``).
 
     Returns
     -------
@@ -489,15 +547,14 @@ def stabilization_diagram(result, criteria: StabilityCriteria | None = None, *,
         raise TypeError(f"criteria must be a StabilityCriteria; got {type(criteria).__name__}")
     n_out = int(result.n_outputs)
     if output_names is None:
-        names = tuple(f"y{k}" for k in range(n_out))
+        names = tuple(getattr(result, "output_names", ())) or tuple(f"y{k}" for k in range(n_out))
     else:
         names = tuple(str(s) for s in output_names)
         if len(names) != n_out:
             raise ValueError(f"output_names must have {n_out} entries (one per output); got {len(names)}")
     has_std = all(m.has_uncertainty for m in result.modes)
-    c = criteria
-    k_std = c.frequency_std_factor if has_std else None
 
+    # Flatten the orders into the core's Poles; the judging is the core's (stabilization.hpp).
     cols = {k: [] for k in ("order", "f", "xi", "sf", "sxi", "close", "coupled")}
     shapes, shapes_sr, shapes_si = [], [], []
     for m in result.modes:
@@ -506,108 +563,57 @@ def stabilization_diagram(result, criteria: StabilityCriteria | None = None, *,
         cols["f"].append(np.asarray(m.frequency_hz, float))
         cols["xi"].append(np.asarray(m.damping_ratio, float))
         nan = np.full(n, np.nan)
-        cols["sf"].append(np.asarray(m.frequency_std, float) if m.has_uncertainty else nan)
-        cols["sxi"].append(np.asarray(m.damping_std, float) if m.has_uncertainty else nan)
+        cols["sf"].append(np.asarray(m.frequency_std, float) if has_std else nan)
+        cols["sxi"].append(np.asarray(m.damping_std, float) if has_std else nan)
         cols["close"].append(np.full(n, bool(m.close_singular_values)))
         coupled = getattr(m, "noise_coupled", None)
         cols["coupled"].append(np.zeros(n, bool) if coupled is None else np.asarray(coupled, bool).reshape(n))
         shapes.append(np.asarray(m.mode_shape, complex).reshape(n_out, n))
         nan2 = np.full((n_out, n), np.nan)
-        shapes_sr.append(np.asarray(m.mode_shape_std_real, float).reshape(n_out, n) if m.has_uncertainty else nan2)
-        shapes_si.append(np.asarray(m.mode_shape_std_imag, float).reshape(n_out, n) if m.has_uncertainty else nan2)
-    order = np.concatenate(cols["order"])
-    f = np.concatenate(cols["f"])
-    xi = np.concatenate(cols["xi"])
-    sf = np.concatenate(cols["sf"])
-    sxi = np.concatenate(cols["sxi"])
-    close = np.concatenate(cols["close"])
-    coupled = np.concatenate(cols["coupled"])
-    shape = np.concatenate(shapes, axis=1)
-    n_poles = f.size
+        shapes_sr.append(np.asarray(m.mode_shape_std_real, float).reshape(n_out, n) if has_std else nan2)
+        shapes_si.append(np.asarray(m.mode_shape_std_imag, float).reshape(n_out, n) if has_std else nan2)
+    poles = _core.Poles()
+    poles.order = _concat(cols["order"], np.int64)
+    poles.frequency_hz = _concat(cols["f"])
+    poles.damping_ratio = _concat(cols["xi"])
+    poles.frequency_std = _concat(cols["sf"])
+    poles.damping_std = _concat(cols["sxi"])
+    poles.close_singular_values = _concat(cols["close"], bool)
+    poles.noise_coupled = _concat(cols["coupled"], bool)
+    poles.mode_shape = np.concatenate(shapes, axis=1) if shapes else np.zeros((n_out, 0), complex)
+    poles.mode_shape_std_real = np.concatenate(shapes_sr, axis=1) if shapes else np.zeros((n_out, 0))
+    poles.mode_shape_std_imag = np.concatenate(shapes_si, axis=1) if shapes else np.zeros((n_out, 0))
+    poles.orders = [int(m.order) for m in result.modes]
+    poles.has_uncertainty = bool(has_std)
 
-    status = np.empty(n_poles, dtype=object)
-    reason = np.empty(n_poles, dtype=object)
-    matched = np.full(n_poles, -1, dtype=np.int64)
-    df = np.full(n_poles, np.nan)
-    dxi = np.full(n_poles, np.nan)
-    mac = np.full(n_poles, np.nan)
-    dz = np.full(n_poles, np.nan)
-
+    core_criteria = criteria._to_core()
     # The band of interest given to identify (frequency_range): poles outside it are rejected.
     band = result.settings.get("frequency_range") if isinstance(result.settings, dict) else None
-    valid = np.zeros(n_poles, dtype=bool)
-    for i in range(n_poles):
-        r = _pole_checks(f[i], xi[i], sf[i], c, has_std)
-        if band is not None and not band[0] <= f[i] <= band[1]:
-            r = [f"outside the band {band[0]:g}-{band[1]:g} Hz"] + r
-        if r:
-            status[i], reason[i] = PoleStatus.REJECTED, "; ".join(r)
-        valid[i] = not r
-
-    orders = tuple(int(m.order) for m in result.modes)
-    for j, n in enumerate(orders):
-        cur = np.flatnonzero((order == n) & valid)
-        if j == 0:
-            for i in cur:
-                status[i], reason[i] = PoleStatus.UNSTABLE, "lowest order: no previous order to compare"
-            continue
-        prev = np.flatnonzero((order == orders[j - 1]) & valid)
-        if prev.size == 0:
-            for i in cur:
-                status[i], reason[i] = PoleStatus.UNSTABLE, f"no accepted pole at the previous order {orders[j - 1]}"
-            continue
-        if cur.size == 0:
-            continue
-        mac_cp = modal_assurance_criterion(shape[:, cur], shape[:, prev])
-        rel_cp = np.abs(f[cur][:, None] - f[prev][None, :]) / f[prev][None, :]
-        cost = np.where(rel_cp <= c.match_window, rel_cp + (1.0 - mac_cp), np.inf)
-        best = np.argmin(cost, axis=1)  # first minimum: deterministic
-        for a, i in enumerate(cur):
-            if not np.isfinite(cost[a, best[a]]):  # nothing of the previous order nearby
-                status[i] = PoleStatus.UNSTABLE
-                reason[i] = (f"no match: no pole within {_pct(c.match_window)} in frequency at the previous "
-                             f"order {orders[j - 1]}")
-                continue
-            p = prev[best[a]]
-            matched[i] = p
-            df[i] = rel_cp[a, best[a]]
-            mac[i] = mac_cp[a, best[a]]
-            dxi[i] = abs(xi[i] - xi[p]) / abs(xi[p]) if xi[p] != 0 else (0.0 if xi[i] == 0 else np.inf)
-            why = []
-            if df[i] > c.max_frequency_change:
-                why.append(f"frequency change {_pct(df[i])} > {_pct(c.max_frequency_change)}")
-            if k_std is not None:
-                comb = math.hypot(sf[i], sf[p])
-                dz[i] = abs(f[i] - f[p]) / comb if comb > 0 else np.inf
-                if dz[i] > k_std:
-                    why.append(f"frequency change {abs(f[i] - f[p]):.3g} Hz > {k_std:g} x combined std "
-                               f"{comb:.3g} Hz")
-            if why:
-                status[i] = PoleStatus.UNSTABLE
-            else:
-                k_xi = c.damping_std_factor if has_std else None
-                comb_xi = math.hypot(sxi[i], sxi[p]) if k_xi is not None else np.nan
-                if k_xi is not None and np.isfinite(comb_xi):
-                    if abs(xi[i] - xi[p]) > k_xi * comb_xi:
-                        why.append(f"damping change {abs(xi[i] - xi[p]):.3g} > {k_xi:g} x combined std {comb_xi:.3g}")
-                    elif dxi[i] > c.max_damping_change_with_std:
-                        why.append(f"damping change {_pct(dxi[i])} > {_pct(c.max_damping_change_with_std)}")
-                elif dxi[i] > c.max_damping_change:
-                    why.append(f"damping change {_pct(dxi[i])} > {_pct(c.max_damping_change)}")
-                if mac[i] < c.min_mac:
-                    why.append(f"MAC {mac[i]:.4f} < {c.min_mac:g}")
-                status[i] = PoleStatus.STABLE_FREQUENCY if why else PoleStatus.STABLE
-            reason[i] = ("; ".join(why) + f" (vs order {orders[j - 1]})") if why else ""
-
+    if band is not None:
+        core_criteria.frequency_range = (float(band[0]), float(band[1]))
+    d = _core.stabilization_diagram(poles, core_criteria)
+    p = d.poles
+    n_poles = int(p.frequency_hz.size)
+    status = np.empty(n_poles, dtype=object)
+    status[:] = [_STATUS_OF_CORE[s] for s in d.status]
     return Diagram(
-        order=order, frequency_hz=f, damping_ratio=xi, frequency_std=sf, damping_std=sxi,
-        mode_shape=shape, mode_shape_std_real=np.concatenate(shapes_sr, axis=1),
-        mode_shape_std_imag=np.concatenate(shapes_si, axis=1), status=status,
-        reason=reason.astype(str) if n_poles else np.array([], dtype=str), matched_pole=matched,
-        frequency_change=df, damping_change=dxi, mac=mac, frequency_change_std=dz,
-        close_singular_values=close, noise_coupled=coupled, orders=orders, fs=float(result.fs), output_names=names,
-        criteria=c, has_uncertainty=has_std, result_settings=dict(result.settings),
+        order=np.asarray(p.order, np.int64), frequency_hz=p.frequency_hz, damping_ratio=p.damping_ratio,
+        frequency_std=p.frequency_std, damping_std=p.damping_std,
+        mode_shape=p.mode_shape, mode_shape_std_real=p.mode_shape_std_real,
+        mode_shape_std_imag=p.mode_shape_std_imag, status=status,
+        reason=np.array(d.reason, dtype=str) if n_poles else np.array([], dtype=str),
+        matched_pole=np.asarray(d.matched_pole, np.int64),
+        frequency_change=d.frequency_change, damping_change=d.damping_change, mac=d.mac,
+        frequency_change_std=d.frequency_change_std,
+        close_singular_values=np.asarray(p.close_singular_values, bool),
+        noise_coupled=np.asarray(p.noise_coupled, bool), orders=tuple(int(o) for o in p.orders),
+        fs=float(result.fs), output_names=names, criteria=criteria, has_uncertainty=has_std,
+        result_settings=dict(result.settings),
     )
+
+
+def _concat(parts, dtype=float) -> np.ndarray:
+    return np.concatenate(parts).astype(dtype, copy=False) if parts else np.zeros(0, dtype)
 
 
 # --------------------------------------------------------------------------- mode selection
@@ -642,13 +648,18 @@ class SelectedModes:
     order_min: np.ndarray              #: (n_modes,) lowest order in the cluster
     order_max: np.ndarray              #: (n_modes,) highest order in the cluster
     members: tuple                     #: per mode, the diagram indices of its poles
-    mode_of_pole: np.ndarray           #: (diagram.n_poles,) mode index of each pole, -1 if none
-    dropped_frequency_hz: np.ndarray   #: median frequency of each dropped (too small) cluster, Hz
+    #: (diagram.n_poles,) index (from 0, into these arrays) of each pole's mode, -1 if none;
+    #: the mode's number in tables and exports is this + 1
+    mode_of_pole: np.ndarray
+    dropped_frequency_hz: np.ndarray   #: median frequency of each dropped cluster, Hz
     dropped_n_poles: np.ndarray        #: size of each dropped cluster
-    min_cluster_size: int              #: the size threshold actually applied
+    min_cluster_size: int              #: the size threshold actually applied (the smallest, per cluster)
     output_names: tuple
     settings: ClusteringSettings = field(default_factory=ClusteringSettings)
     has_uncertainty: bool = True
+    dropped_reason: tuple = ()         #: why each cluster was dropped, in words
+    #: (n_modes,) median σ_f / (f ξ) over the cluster (NaN without uncertainty)
+    frequency_std_per_bandwidth: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
     @property
     def n_modes(self) -> int:
@@ -658,7 +669,9 @@ class SelectedModes:
         return self.n_modes
 
     def to_dataframe(self):
-        """One row per mode: f, σ_f, spread, ξ, σ_ξ, spread, cluster size and orders."""
+        """One row per mode, numbered from 1 (the index ``mode``, as in every table, plot and
+        export): f, σ_f, spread, ξ, σ_ξ, spread, cluster size and orders, and the shape per
+        channel in columns ``mode_shape_<channel>_real`` ...."""
         import pandas as pd
 
         data = {
@@ -674,7 +687,7 @@ class SelectedModes:
             data[f"mode_shape_{name}_imag"] = self.mode_shape[k].imag
             data[f"mode_shape_{name}_std_real"] = self.mode_shape_std_real[k]
             data[f"mode_shape_{name}_std_imag"] = self.mode_shape_std_imag[k]
-        return pd.DataFrame(data, index=pd.RangeIndex(self.n_modes, name="mode"))
+        return pd.DataFrame(data, index=pd.RangeIndex(1, self.n_modes + 1, name="mode"))
 
     def to_dict(self) -> dict:
         """Plain-Python (JSON-ready) description: one dict per mode, shapes per channel."""
@@ -706,8 +719,9 @@ class SelectedModes:
             })
         return {
             "modes": modes,
-            "dropped_clusters": [{"frequency_hz": num(f), "n_poles": int(n)}
-                                 for f, n in zip(self.dropped_frequency_hz, self.dropped_n_poles)],
+            "dropped_clusters": [{"frequency_hz": num(f), "n_poles": int(n), "reason": str(r)}
+                                 for f, n, r in zip(self.dropped_frequency_hz, self.dropped_n_poles,
+                                                    self.dropped_reason)],
             "min_cluster_size": int(self.min_cluster_size),
             "clustering": self.settings.to_dict(),
         }
@@ -732,8 +746,14 @@ class SelectedModes:
         s = f"{self.n_modes} modes (std: analytic, median over the cluster; spread: across the cluster)\n"
         s += self.table()
         if self.dropped_n_poles.size:
-            s += (f"\n{self.dropped_n_poles.size} cluster(s) with fewer than {self.min_cluster_size} "
-                  "poles dropped")
+            too_small = sum(1 for r in self.dropped_reason if "fewer than" in r)
+            too_uncertain = self.dropped_n_poles.size - too_small
+            parts = []
+            if too_small:
+                parts.append(f"{too_small} with fewer than {self.min_cluster_size} poles")
+            if too_uncertain:
+                parts.append(f"{too_uncertain} whose frequency std exceeds the peak's half-power bandwidth")
+            s += f"\n{self.dropped_n_poles.size} cluster(s) dropped: " + ", ".join(parts)
         return s
 
     def __repr__(self) -> str:
@@ -747,13 +767,6 @@ class SelectedModes:
         return mode_shapes(self, fig=fig, channel_positions=channel_positions)
 
 
-def _default_min_cluster_size(diagram: Diagram, in_set: np.ndarray, fraction: float) -> int:
-    if not in_set.any():
-        return 3
-    first = int(diagram.order[in_set].min())
-    n_after = sum(1 for n in diagram.orders if n >= first)
-    return max(3, int(math.ceil(fraction * n_after - 1e-9)))
-
 
 def select_modes(diagram: Diagram, settings: ClusteringSettings | None = None, **kwargs) -> SelectedModes:
     """Group the stable poles of a diagram into physical modes (deterministic).
@@ -762,15 +775,18 @@ def select_modes(diagram: Diagram, settings: ClusteringSettings | None = None, *
 
     1. take the poles whose status is in ``settings.statuses`` (default: ``STABLE``);
     2. distance ``d_ij = |f_i - f_j| / max(f_i, f_j) + (1 - MAC_ij)`` between every pair;
-    3. agglomerative clustering (:func:`scipy.cluster.hierarchy.linkage`, ``settings.linkage``)
-       cut at ``settings.distance_threshold`` (:func:`~scipy.cluster.hierarchy.fcluster`,
-       criterion ``"distance"``);
+    3. agglomerative clustering (``settings.linkage``) cut at ``settings.distance_threshold``:
+       the core's nearest-neighbour chain, equal to :func:`scipy.cluster.hierarchy.linkage` +
+       :func:`~scipy.cluster.hierarchy.fcluster` with criterion ``"distance"``;
     4. a physical mode appears once per order: when a cluster holds several poles of one order
        (a mode doubled by a spurious twin), keep the one nearest to the cluster's median
        frequency. (Penalising same-order pairs in the distance instead would split such a mode
        into two clusters.)
-    5. drop clusters with fewer than ``min_cluster_size`` members (reported in
-       ``dropped_frequency_hz`` / ``dropped_n_poles``);
+    5. drop clusters with fewer than ``min_cluster_size`` members, and clusters whose median
+       ``σ_f / (f ξ)`` exceeds ``max_frequency_std_per_bandwidth`` (default 1: the frequency is
+       less certain than the half-power bandwidth of the peak; spurious poles, whose σ the noise
+       directions inflate, have 2–5, structural modes 0.05–0.7 on the shared records); each is
+       reported in ``dropped_frequency_hz`` / ``dropped_n_poles`` / ``dropped_reason``;
     6. the representative of a cluster is its member nearest to the cluster's median frequency
        among the members at orders that do **not** cut close singular values (whose σ are
        meaningful), or among all members when every member's order does; ties go to the higher
@@ -794,9 +810,6 @@ def select_modes(diagram: Diagram, settings: ClusteringSettings | None = None, *
     SelectedModes
         Sorted by frequency; empty when no pole qualifies.
     """
-    import scipy.cluster.hierarchy as sch
-    from scipy.spatial.distance import squareform
-
     if not isinstance(diagram, Diagram):
         raise TypeError(f"diagram must be a Diagram (from stabilization_diagram); got {type(diagram).__name__}")
     if settings is None:
@@ -806,103 +819,23 @@ def select_modes(diagram: Diagram, settings: ClusteringSettings | None = None, *
     elif not isinstance(settings, ClusteringSettings):
         raise TypeError(f"settings must be a ClusteringSettings; got {type(settings).__name__}")
 
-    in_set = np.zeros(diagram.n_poles, dtype=bool)
-    for s in settings.statuses:
-        in_set |= diagram.is_status(s)
-    min_size = settings.min_cluster_size or _default_min_cluster_size(diagram, in_set,
-                                                                     settings.min_cluster_fraction)
-    idx = np.flatnonzero(in_set)
-    f, xi, order = diagram.frequency_hz, diagram.damping_ratio, diagram.order
-    shape = diagram.mode_shape
-
-    clusters = []
-    if idx.size == 1:
-        clusters = [idx]
-    elif idx.size > 1:
-        fi = f[idx]
-        dist = np.abs(fi[:, None] - fi[None, :]) / np.maximum(fi[:, None], fi[None, :])
-        dist += 1.0 - modal_assurance_criterion(shape[:, idx], shape[:, idx])
-        np.fill_diagonal(dist, 0.0)
-        dist = 0.5 * (dist + dist.T)
-        z = sch.linkage(squareform(dist, checks=False), method=settings.linkage)
-        labels = sch.fcluster(z, t=settings.distance_threshold, criterion="distance")
-        for lab in np.unique(labels):
-            clusters.append(idx[labels == lab])
-
-    kept, dropped = [], []
-    for members in clusters:
-        med = np.median(f[members])
-        # one pole per order: the one nearest to the median frequency (ties: lower index)
-        keep = []
-        for n in np.unique(order[members]):
-            at_n = members[order[members] == n]
-            keep.append(at_n[np.argmin(np.abs(f[at_n] - med))])
-        members = np.sort(np.asarray(keep, dtype=np.int64))
-        if members.size < min_size:
-            dropped.append((float(np.median(f[members])), members.size))
-        else:
-            kept.append(members)
-
-    kept.sort(key=lambda m: float(np.median(f[m])))
-    dropped.sort()
-    n_out = diagram.n_outputs
-    n_modes = len(kept)
-    rep = np.zeros(n_modes, dtype=np.int64)
-    f_spread = np.zeros(n_modes)
-    xi_spread = np.zeros(n_modes)
-    sh_spread_r = np.zeros((n_out, n_modes))
-    sh_spread_i = np.zeros((n_out, n_modes))
-    min_mac = np.zeros(n_modes)
-    sf_med = np.full(n_modes, np.nan)
-    sxi_med = np.full(n_modes, np.nan)
-    mode_of_pole = np.full(diagram.n_poles, -1, dtype=np.int64)
-    for k, members in enumerate(kept):
-        mode_of_pole[members] = k
-        med = np.median(f[members])
-        # the representative's σ is read from it: not at a cut inside a cluster, not noise-coupled
-        candidates = members[~(diagram.close_singular_values[members] | diagram.noise_coupled[members])]
-        if candidates.size == 0:
-            candidates = members
-        # nearest to the median; ties -> higher order (candidates ascend in order, take last)
-        gap = np.abs(f[candidates] - med)
-        rep[k] = candidates[np.flatnonzero(gap == gap.min())[-1]]
-        # σ robust to the order it is read at: the median over the cluster's reliable poles
-        # (the representative's own σ is that of one order, which above the true order varies)
-        reliable = members[~(diagram.close_singular_values[members] | diagram.noise_coupled[members])
-                           & np.isfinite(diagram.frequency_std[members])]
-        if reliable.size:
-            sf_med[k] = np.median(diagram.frequency_std[reliable])
-            sxi_med[k] = np.median(diagram.damping_std[reliable])
-        else:
-            sf_med[k], sxi_med[k] = diagram.frequency_std[rep[k]], diagram.damping_std[rep[k]]
-        ddof = 1 if members.size > 1 else 0
-        f_spread[k] = np.std(f[members], ddof=ddof)
-        xi_spread[k] = np.std(xi[members], ddof=ddof)
-        ref = int(np.argmax(np.abs(shape[:, rep[k]])))
-        aligned = shape[:, members] / shape[ref, members][None, :]
-        sh_spread_r[:, k] = np.std(aligned.real, axis=1, ddof=ddof)
-        sh_spread_i[:, k] = np.std(aligned.imag, axis=1, ddof=ddof)
-        min_mac[k] = modal_assurance_criterion(shape[:, rep[k]], shape[:, members]).min()
-
-    def empty_if_none(a):
-        return a if a.size else np.zeros(0)
-
+    sel = _core.select_modes(diagram._to_core(), settings._to_core())
     return SelectedModes(
-        frequency_hz=f[rep], damping_ratio=xi[rep], mode_shape=shape[:, rep],
-        frequency_std=sf_med, damping_std=sxi_med,
-        mode_shape_std_real=diagram.mode_shape_std_real[:, rep],
-        mode_shape_std_imag=diagram.mode_shape_std_imag[:, rep],
-        frequency_spread=f_spread, damping_spread=xi_spread,
-        mode_shape_spread_real=sh_spread_r, mode_shape_spread_imag=sh_spread_i,
-        min_mac=min_mac, representative_order=order[rep], representative_pole=rep,
-        n_poles=np.array([m.size for m in kept], dtype=np.int64),
-        order_min=np.array([order[m].min() for m in kept], dtype=np.int64),
-        order_max=np.array([order[m].max() for m in kept], dtype=np.int64),
-        members=tuple(kept), mode_of_pole=mode_of_pole,
-        dropped_frequency_hz=empty_if_none(np.array([d[0] for d in dropped])),
-        dropped_n_poles=np.array([d[1] for d in dropped], dtype=np.int64),
-        min_cluster_size=int(min_size), output_names=diagram.output_names, settings=settings,
-        has_uncertainty=diagram.has_uncertainty,
+        frequency_hz=sel.frequency_hz, damping_ratio=sel.damping_ratio, mode_shape=sel.mode_shape,
+        frequency_std=sel.frequency_std, damping_std=sel.damping_std,
+        mode_shape_std_real=sel.mode_shape_std_real, mode_shape_std_imag=sel.mode_shape_std_imag,
+        frequency_spread=sel.frequency_spread, damping_spread=sel.damping_spread,
+        mode_shape_spread_real=sel.mode_shape_spread_real, mode_shape_spread_imag=sel.mode_shape_spread_imag,
+        min_mac=sel.min_mac, representative_order=np.asarray(sel.representative_order, np.int64),
+        representative_pole=np.asarray(sel.representative_pole, np.int64),
+        n_poles=np.asarray(sel.n_poles, np.int64), order_min=np.asarray(sel.order_min, np.int64),
+        order_max=np.asarray(sel.order_max, np.int64),
+        members=tuple(np.asarray(m, dtype=np.int64) for m in sel.members),
+        mode_of_pole=np.asarray(sel.mode_of_pole, np.int64),
+        dropped_frequency_hz=sel.dropped_frequency_hz, dropped_n_poles=np.asarray(sel.dropped_n_poles, np.int64),
+        min_cluster_size=int(sel.min_cluster_size), output_names=diagram.output_names, settings=settings,
+        has_uncertainty=diagram.has_uncertainty, dropped_reason=tuple(sel.dropped_reason),
+        frequency_std_per_bandwidth=sel.frequency_std_per_bandwidth,
     )
 
 

@@ -435,3 +435,59 @@ def test_a_pole_matches_only_a_pole_within_the_window():
     assert s is PoleStatus.UNSTABLE and reason.startswith("no match: no pole within 5 %")
     assert d.matched_pole[i] == -1
     assert status_of(d, 6, 27.0)[0] is PoleStatus.STABLE
+
+
+def test_channel_names_and_mode_numbers_are_the_same_in_every_output(tmp_path):
+    """A DataFrame's columns name the shape columns everywhere; modes are numbered from 1 in the
+    DataFrame index, the CSV, the JSON-ready dict and the xarray coordinate alike."""
+    import pandas as pd
+
+    from modaluq.export import write_csv
+
+    sim = modaluq.simulate(20_000, seed=1)
+    names = ["acc1", "acc2", "acc5"]
+    y = pd.DataFrame(sim.y, columns=names)
+    result = modaluq.identify(y, sim.u, fs=sim.fs, block_rows=15, orders=range(2, 31, 2))
+    assert result.output_names == tuple(names)
+    per_order = result.to_dataframe()
+    assert {f"mode_shape_{n}" for n in names} <= set(per_order.columns)
+    assert per_order["mode"].min() == 1
+    diagram = result.stabilization_diagram()
+    assert diagram.output_names == tuple(names)
+    sel = diagram.select_modes()
+    df = sel.to_dataframe()
+    assert list(df.index) == list(range(1, sel.n_modes + 1)) and df.index.name == "mode"
+    assert "mode_shape_acc2_real" in df.columns
+    assert [m["mode"] for m in sel.to_dict()["modes"]] == list(range(1, sel.n_modes + 1))
+    csv = pd.read_csv(write_csv(tmp_path / "modes.csv", sel))
+    assert list(csv["mode"]) == list(range(1, sel.n_modes + 1))
+    ds = diagram.to_xarray(selected=sel)
+    assert list(ds["mode"].values) == list(range(1, sel.n_modes + 1))
+    # mode_of_pole in the dataset uses the same numbers (0: no mode)
+    k = int(sel.representative_pole[2])
+    assert int(ds["mode_of_pole"].values[k]) == 3
+    with pytest.raises(ValueError, match="output_names"):
+        modaluq.identify(sim.y, fs=sim.fs, block_rows=15, orders=4, output_names=["a", "b"])
+
+
+def test_spurious_clusters_are_dropped_by_their_uncertainty_with_the_reason():
+    """The paper chain at 50 Hz, output-only, band 1-20 Hz with automatic settings: without the
+    bandwidth test two spurious clusters (all poles noise-coupled, σ_f 1-2 % of f) are selected
+    beside the six modes; with it (default) exactly the six remain, and the two are listed with
+    their reason."""
+    sim = modaluq.simulate(100_000, seed=1)
+    with pytest.warns(modaluq.ModalUQWarning, match="decay more slowly"):  # the spurious poles' own
+        result = modaluq.identify(sim.y, fs=sim.fs, frequency_range=(1, 20))
+    diagram = result.stabilization_diagram()
+    truth = np.sort(sim.frequency_hz)
+    loose = diagram.select_modes(max_frequency_std_per_bandwidth=None)
+    sel = diagram.select_modes()
+    assert sel.n_modes == 6
+    np.testing.assert_allclose(sel.frequency_hz, truth, rtol=0.005)
+    assert loose.n_modes > 6  # the test removes something real
+    extra = [f for f in loose.frequency_hz if np.min(np.abs(truth - f) / truth) > 0.01]
+    reasons = dict(zip(np.round(sel.dropped_frequency_hz, 6), sel.dropped_reason))
+    for f in extra:
+        near = min(reasons, key=lambda g: abs(g - f))
+        assert "half-power bandwidth" in reasons[near]
+    assert np.all(sel.frequency_std_per_bandwidth < 1)

@@ -9,6 +9,8 @@
 #include "layout.hpp"
 #include "modal.hpp"
 #include "realization.hpp"
+#include "selection.hpp"
+#include "stabilization.hpp"
 #include "subspace.hpp"
 #include "uncertainty.hpp"
 #include "version.hpp"

@@ -1,0 +1,110 @@
+// Bindings of stabilization.hpp and selection.hpp.
+#include <pybind11/eigen.h>
+#include <pybind11/pybind11.h>
+#include <pybind11/stl.h>
+
+#include <modaluq/selection.hpp>
+#include <modaluq/stabilization.hpp>
+
+#include "bindings.hpp"
+
+namespace py = pybind11;
+
+void modaluq::python::bind_stabilization(py::module_& m) {
+    py::enum_<PoleStatus>(m, "PoleStatus")
+        .value("stable", PoleStatus::stable)
+        .value("stable_frequency", PoleStatus::stable_frequency)
+        .value("unstable", PoleStatus::unstable)
+        .value("rejected", PoleStatus::rejected);
+    py::enum_<Linkage>(m, "Linkage")
+        .value("single", Linkage::single)
+        .value("complete", Linkage::complete)
+        .value("average", Linkage::average)
+        .value("weighted", Linkage::weighted);
+
+    py::class_<StabilityCriteria>(m, "StabilityCriteria")
+        .def(py::init<>())
+        .def_readwrite("max_frequency_change", &StabilityCriteria::max_frequency_change)
+        .def_readwrite("max_damping_change", &StabilityCriteria::max_damping_change)
+        .def_readwrite("min_mac", &StabilityCriteria::min_mac)
+        .def_readwrite("frequency_std_factor", &StabilityCriteria::frequency_std_factor)
+        .def_readwrite("max_frequency_cov", &StabilityCriteria::max_frequency_cov)
+        .def_readwrite("min_damping_ratio", &StabilityCriteria::min_damping_ratio)
+        .def_readwrite("max_damping_ratio", &StabilityCriteria::max_damping_ratio)
+        .def_readwrite("damping_std_factor", &StabilityCriteria::damping_std_factor)
+        .def_readwrite("max_damping_change_with_std", &StabilityCriteria::max_damping_change_with_std)
+        .def_readwrite("match_window", &StabilityCriteria::match_window)
+        .def_readwrite("frequency_range", &StabilityCriteria::frequency_range)
+        .def("validate", &StabilityCriteria::validate);
+
+    py::class_<Poles>(m, "Poles")
+        .def(py::init<>())
+        .def_readwrite("order", &Poles::order)
+        .def_readwrite("frequency_hz", &Poles::frequency_hz)
+        .def_readwrite("damping_ratio", &Poles::damping_ratio)
+        .def_readwrite("frequency_std", &Poles::frequency_std)
+        .def_readwrite("damping_std", &Poles::damping_std)
+        .def_readwrite("mode_shape", &Poles::mode_shape)
+        .def_readwrite("mode_shape_std_real", &Poles::mode_shape_std_real)
+        .def_readwrite("mode_shape_std_imag", &Poles::mode_shape_std_imag)
+        .def_readwrite("close_singular_values", &Poles::close_singular_values)
+        .def_readwrite("noise_coupled", &Poles::noise_coupled)
+        .def_readwrite("orders", &Poles::orders)
+        .def_readwrite("has_uncertainty", &Poles::has_uncertainty)
+        .def("validate", &Poles::validate);
+    m.def("poles_of", &poles_of, py::arg("identification"));
+
+    py::class_<Diagram>(m, "Diagram")
+        .def(py::init<>())
+        .def_readwrite("poles", &Diagram::poles)
+        .def_readwrite("status", &Diagram::status)
+        .def_readwrite("reason", &Diagram::reason)
+        .def_readwrite("matched_pole", &Diagram::matched_pole)
+        .def_readwrite("frequency_change", &Diagram::frequency_change)
+        .def_readwrite("damping_change", &Diagram::damping_change)
+        .def_readwrite("mac", &Diagram::mac)
+        .def_readwrite("frequency_change_std", &Diagram::frequency_change_std)
+        .def_readwrite("criteria", &Diagram::criteria);
+    m.def("stabilization_diagram", py::overload_cast<Poles, const StabilityCriteria&>(&stabilization_diagram),
+          py::arg("poles"), py::arg("criteria"), py::call_guard<py::gil_scoped_release>());
+    m.def("modal_assurance_criterion", &modal_assurance_criterion, py::arg("shape_a"), py::arg("shape_b"));
+
+    py::class_<ClusteringOptions>(m, "ClusteringOptions")
+        .def(py::init<>())
+        .def_readwrite("distance_threshold", &ClusteringOptions::distance_threshold)
+        .def_readwrite("min_cluster_size", &ClusteringOptions::min_cluster_size)
+        .def_readwrite("min_cluster_fraction", &ClusteringOptions::min_cluster_fraction)
+        .def_readwrite("per_cluster_min_size", &ClusteringOptions::per_cluster_min_size)
+        .def_readwrite("max_frequency_std_per_bandwidth", &ClusteringOptions::max_frequency_std_per_bandwidth)
+        .def_readwrite("statuses", &ClusteringOptions::statuses)
+        .def_readwrite("linkage", &ClusteringOptions::linkage)
+        .def("validate", &ClusteringOptions::validate);
+
+    py::class_<SelectedModes>(m, "SelectedModes")
+        .def_readonly("frequency_hz", &SelectedModes::frequency_hz)
+        .def_readonly("damping_ratio", &SelectedModes::damping_ratio)
+        .def_readonly("mode_shape", &SelectedModes::mode_shape)
+        .def_readonly("frequency_std", &SelectedModes::frequency_std)
+        .def_readonly("damping_std", &SelectedModes::damping_std)
+        .def_readonly("mode_shape_std_real", &SelectedModes::mode_shape_std_real)
+        .def_readonly("mode_shape_std_imag", &SelectedModes::mode_shape_std_imag)
+        .def_readonly("frequency_spread", &SelectedModes::frequency_spread)
+        .def_readonly("damping_spread", &SelectedModes::damping_spread)
+        .def_readonly("mode_shape_spread_real", &SelectedModes::mode_shape_spread_real)
+        .def_readonly("mode_shape_spread_imag", &SelectedModes::mode_shape_spread_imag)
+        .def_readonly("min_mac", &SelectedModes::min_mac)
+        .def_readonly("representative_order", &SelectedModes::representative_order)
+        .def_readonly("representative_pole", &SelectedModes::representative_pole)
+        .def_readonly("n_poles", &SelectedModes::n_poles)
+        .def_readonly("order_min", &SelectedModes::order_min)
+        .def_readonly("order_max", &SelectedModes::order_max)
+        .def_readonly("members", &SelectedModes::members)
+        .def_readonly("mode_of_pole", &SelectedModes::mode_of_pole)
+        .def_readonly("dropped_frequency_hz", &SelectedModes::dropped_frequency_hz)
+        .def_readonly("dropped_n_poles", &SelectedModes::dropped_n_poles)
+        .def_readonly("dropped_reason", &SelectedModes::dropped_reason)
+        .def_readonly("frequency_std_per_bandwidth", &SelectedModes::frequency_std_per_bandwidth)
+        .def_readonly("min_cluster_size", &SelectedModes::min_cluster_size);
+    m.def("select_modes", &select_modes, py::arg("diagram"), py::arg("options"),
+          py::call_guard<py::gil_scoped_release>());
+}

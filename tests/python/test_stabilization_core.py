@@ -1,0 +1,135 @@
+"""The stabilization diagram and the mode selection of the C++ core (stabilization.hpp,
+selection.hpp) equal an independent NumPy/SciPy implementation (stabilization_oracle.py).
+
+The oracle is the pure-Python code these functions were before they moved into the core; its
+clustering is SciPy's ``linkage`` + ``fcluster``, so the core's nearest-neighbour chain is
+checked against a different algorithm. Statuses, reasons and matches must be identical; numbers
+equal to rounding.
+"""
+
+import numpy as np
+import pytest
+
+import modaluq
+from modaluq import _core
+from stabilization_oracle import select_modes_reference, stabilization_diagram_reference
+
+
+def _records():
+    sim = modaluq.simulate(20_000, seed=3)
+    frame = modaluq.simulate(12_000, seed=5, n_dof=4, input_dofs=(0, 3), output_dofs=(0, 1, 2, 3))
+    return {
+        "chain input/output": lambda: modaluq.identify(sim.y, sim.u, fs=sim.fs, block_rows=15,
+                                                       orders=range(2, 41, 2)),
+        "chain output-only, band": lambda: modaluq.identify(sim.y, fs=sim.fs, frequency_range=(3, 16)),
+        "chain without uncertainty": lambda: modaluq.identify(sim.y, sim.u, fs=sim.fs, block_rows=15,
+                                                              orders=range(2, 31, 2), uncertainty=False),
+        "frame, two inputs": lambda: modaluq.identify(frame.y, frame.u, fs=frame.fs, block_rows=12,
+                                                      orders=range(2, 45, 1)),
+    }
+
+
+RECORDS = _records()
+CRITERIA = [{}, {"damping_std_factor": 2.0}, {"frequency_std_factor": None, "max_frequency_cov": None},
+            {"max_frequency_change": 0.03, "min_mac": 0.9, "match_window": 0.2}]
+CLUSTERING = [{}, {"linkage": "single"}, {"linkage": "complete", "distance_threshold": 0.05},
+              {"linkage": "weighted", "min_cluster_size": 2},
+              {"statuses": ("stable", "stable_frequency"), "min_cluster_fraction": 0.5},
+              {"per_cluster_min_size": True, "max_frequency_std_per_bandwidth": 0.3},
+              {"max_frequency_std_per_bandwidth": None}]
+
+
+@pytest.fixture(scope="module")
+def results():
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", modaluq.ModalUQWarning)
+        return {name: make() for name, make in RECORDS.items()}
+
+
+def assert_same_diagram(core, ref):
+    assert core.n_poles == ref.n_poles
+    assert list(core.status) == list(ref.status)
+    assert list(core.reason) == list(ref.reason)
+    np.testing.assert_array_equal(core.matched_pole, ref.matched_pole)
+    np.testing.assert_array_equal(core.order, ref.order)
+    for name in ("frequency_change", "damping_change", "mac", "frequency_change_std"):
+        np.testing.assert_allclose(getattr(core, name), getattr(ref, name), rtol=1e-9, atol=1e-12, err_msg=name)
+    np.testing.assert_array_equal(core.noise_coupled, ref.noise_coupled)
+    np.testing.assert_array_equal(core.close_singular_values, ref.close_singular_values)
+
+
+def assert_same_selection(core, ref):
+    assert core.n_modes == ref.n_modes
+    assert core.min_cluster_size == ref.min_cluster_size
+    np.testing.assert_array_equal(core.representative_pole, ref.representative_pole)
+    assert [list(m) for m in core.members] == [list(m) for m in ref.members]
+    np.testing.assert_array_equal(core.mode_of_pole, ref.mode_of_pole)
+    np.testing.assert_array_equal(core.dropped_n_poles, ref.dropped_n_poles)
+    np.testing.assert_allclose(core.dropped_frequency_hz, ref.dropped_frequency_hz, rtol=1e-12)
+    assert core.dropped_reason == ref.dropped_reason
+    np.testing.assert_allclose(core.frequency_std_per_bandwidth, ref.frequency_std_per_bandwidth, rtol=1e-12)
+    for name in ("frequency_hz", "damping_ratio", "frequency_std", "damping_std", "frequency_spread",
+                 "damping_spread", "mode_shape_spread_real", "mode_shape_spread_imag", "min_mac"):
+        np.testing.assert_allclose(getattr(core, name), getattr(ref, name), rtol=1e-9, atol=1e-13, err_msg=name)
+    for name in ("n_poles", "order_min", "order_max", "representative_order"):
+        np.testing.assert_array_equal(getattr(core, name), getattr(ref, name), err_msg=name)
+
+
+@pytest.mark.parametrize("criteria", CRITERIA, ids=str)
+@pytest.mark.parametrize("record", list(RECORDS))
+def test_core_diagram_equals_the_numpy_reference(results, record, criteria):
+    result = results[record]
+    assert_same_diagram(modaluq.stabilization_diagram(result, **criteria),
+                        stabilization_diagram_reference(result, **criteria))
+
+
+@pytest.mark.parametrize("clustering", CLUSTERING, ids=str)
+@pytest.mark.parametrize("record", list(RECORDS))
+def test_core_selection_equals_the_scipy_reference(results, record, clustering):
+    diagram = modaluq.stabilization_diagram(results[record])
+    core = modaluq.select_modes(diagram, **clustering)
+    ref = select_modes_reference(diagram, **clustering)
+    assert_same_selection(core, ref)
+    if not clustering:
+        assert core.n_modes >= 2  # the comparison covers real clusters, not an empty selection
+
+
+def test_nearest_neighbour_chain_equals_scipy_on_random_points():
+    """Flat clusters of random poles (equal shapes, so d_ij = |f_i - f_j| / max(f_i, f_j); ties have
+    probability zero) equal scipy's, for every linkage and random cut heights."""
+    import scipy.cluster.hierarchy as sch
+
+    rng = np.random.default_rng(7)
+    for trial in range(30):  # one pole per order, so no cluster is thinned
+        n = int(rng.integers(2, 60))
+        f = 10.0 + 5.0 * rng.random(n)
+        d = np.abs(f[:, None] - f[None, :]) / np.maximum(f[:, None], f[None, :])
+        for method in ("single", "complete", "average", "weighted"):
+            condensed = d[np.triu_indices(n, 1)]
+            t = float(np.quantile(condensed, rng.uniform(0.02, 0.6)))
+            labels = sch.fcluster(sch.linkage(condensed, method=method), t=t, criterion="distance")
+            poles = _core.Poles()
+            poles.order = np.arange(1, n + 1, dtype=np.int64)
+            poles.frequency_hz = f
+            poles.damping_ratio = np.full(n, 0.01)
+            poles.frequency_std = np.full(n, 1e-3)
+            poles.damping_std = np.full(n, 1e-4)
+            poles.mode_shape = np.ones((1, n), complex)
+            poles.mode_shape_std_real = np.zeros((1, n))
+            poles.mode_shape_std_imag = np.zeros((1, n))
+            poles.close_singular_values = np.zeros(n, bool)
+            poles.noise_coupled = np.zeros(n, bool)
+            poles.orders = list(range(1, n + 1))
+            diagram = _core.Diagram()
+            diagram.poles = poles
+            diagram.status = [_core.PoleStatus.stable] * n
+            opt = _core.ClusteringOptions()
+            opt.distance_threshold = t
+            opt.min_cluster_size = 1
+            opt.linkage = getattr(_core.Linkage, method)
+            sel = _core.select_modes(diagram, opt)
+            core_partition = sorted(tuple(m) for m in sel.members)
+            ref_partition = sorted(tuple(np.flatnonzero(labels == k)) for k in np.unique(labels))
+            assert core_partition == ref_partition, (trial, method)
