@@ -76,6 +76,13 @@ void modaluq::python::bind_stabilization(py::module_& m) {
         .def_readwrite("min_cluster_fraction", &ClusteringOptions::min_cluster_fraction)
         .def_readwrite("per_cluster_min_size", &ClusteringOptions::per_cluster_min_size)
         .def_readwrite("max_frequency_std_per_bandwidth", &ClusteringOptions::max_frequency_std_per_bandwidth)
+        .def_readwrite("merge_fragments", &ClusteringOptions::merge_fragments)
+        .def_readwrite("drop_doublets", &ClusteringOptions::drop_doublets)
+        .def_readwrite("doublet_window", &ClusteringOptions::doublet_window)
+        .def_readwrite("doublet_min_mac", &ClusteringOptions::doublet_min_mac)
+        .def_readwrite("fragment_std_factor", &ClusteringOptions::fragment_std_factor)
+        .def_readwrite("fragment_min_mac", &ClusteringOptions::fragment_min_mac)
+        .def_readwrite("fragment_max_shared", &ClusteringOptions::fragment_max_shared)
         .def_readwrite("statuses", &ClusteringOptions::statuses)
         .def_readwrite("linkage", &ClusteringOptions::linkage)
         .def("validate", &ClusteringOptions::validate);

@@ -17,6 +17,7 @@ from .simulate import Simulation, simulate
 from .stabilization import (ClusteringSettings, Diagram, PoleStatus, SelectedModes, StabilityCriteria,
                             select_modes, stabilization_diagram)
 from .streaming import CovarianceAccumulator
+from .horizons import HorizonCheck, check_horizons
 
 try:
     from importlib.metadata import PackageNotFoundError, version as _dist_version
@@ -29,6 +30,7 @@ __all__ = [
     "ClusteringSettings",
     "CovarianceAccumulator",
     "Diagram",
+    "HorizonCheck",
     "ModalUQWarning",
     "Modes",
     "NumericalError",
@@ -37,6 +39,7 @@ __all__ = [
     "SelectedModes",
     "Simulation",
     "StabilityCriteria",
+    "check_horizons",
     "identify",
     "select_modes",
     "simulate",

@@ -4,8 +4,13 @@ The rules, in order (fs is the rate after any decimation, T the record length in
 outputs, f_low the band's lower edge):
 
 1. **Horizon.** The lags of H must span at least ``LAG_PERIODS`` periods of the slowest mode of
-   interest: block_rows p = ceil(LAG_PERIODS · fs / f_low). Without a band, f_low = fs / 20
-   (p = 40). p is at least 1 + ceil(MIN_ORDER / l) (so that order MIN_ORDER fits) and at most
+   interest and ``CENTRE_PERIODS`` periods of the band's geometric centre f_c = sqrt(f_low f_high):
+   block_rows p = ceil(fs · max(LAG_PERIODS / f_low, CENTRE_PERIODS / f_c)). The second term
+   matters for narrow bands far from 0 Hz: modes a few per cent apart beat apart only over
+   many periods (the smartphone slab's 17.2 and 17.8 Hz modes, 3 % apart, merge into one pole
+   with 3 % damping with lags of 2 periods of its band's 10 Hz edge, and separate from 10
+   periods of 17 Hz on; docs/settings.md). Without a band, f_low = fs / 20 and only the first
+   term counts (p = 40). p is at least 1 + ceil(MIN_ORDER / l) (so that order MIN_ORDER fits) and at most
    MAX_ROWS / l (H at most MAX_ROWS × MAX_ROWS: the cost grows with its size cubed) and what
    lets the record hold the minimum number of blocks of BLOCK_SPAN (p + q) columns. Longer lags
    resolve closer modes but add estimation noise: lags far beyond the decay times only add
@@ -27,10 +32,11 @@ from dataclasses import dataclass
 
 from ._checks import _integer, _real, _sampling_frequency
 
-__all__ = ["ChosenSettings", "choose_settings", "LAG_PERIODS", "MAX_ROWS", "MAX_ORDER", "MIN_ORDER",
+__all__ = ["ChosenSettings", "choose_settings", "LAG_PERIODS", "CENTRE_PERIODS", "MAX_ROWS", "MAX_ORDER", "MIN_ORDER",
            "XI_REF", "MIN_BLOCKS", "MAX_BLOCKS"]
 
 LAG_PERIODS = 2.0   #: periods of the lowest frequency of interest spanned by the lags
+CENTRE_PERIODS = 10.0  #: periods of the band's geometric centre spanned by the lags
 BLOCK_SPAN = 2      #: a block holds at least this many times p + q Hankel columns
 MAX_ROWS = 300      #: largest number of rows p l of H (larger: the noise floor k* falls, docs/settings.md)
 MIN_ORDER = 20      #: the horizon must allow at least this order
@@ -63,6 +69,13 @@ def lowest_frequency(fs: float, frequency_range=None) -> float:
     return lo if lo > 0 else min(fs / 20.0, hi / 10.0)
 
 
+def centre_frequency(fs: float, frequency_range=None) -> float:
+    """The f_c of the horizon rule: sqrt(f_low f_high) of the band (f_high at most fs / 2)."""
+    f_low = lowest_frequency(fs, frequency_range)
+    f_high = fs / 2.0 if frequency_range is None else min(frequency_range[1], fs / 2.0)
+    return math.sqrt(f_low * max(f_high, f_low))
+
+
 def choose_settings(n_samples: int, fs: float, n_outputs: int, *, frequency_range=None,
                     n_references: int | None = None, block_rows: int | None = None,
                     orders=None, n_blocks: int | None = None) -> ChosenSettings:
@@ -75,7 +88,7 @@ def choose_settings(n_samples: int, fs: float, n_outputs: int, *, frequency_rang
     --------
     >>> s = choose_settings(16_384, 106.25, 3, frequency_range=(10.0, 30.0))
     >>> s.block_rows, s.orders[-1], s.n_blocks
-    (22, 62, 50)
+    (62, 100, 50)
     """
     n_samples = _integer("n_samples", n_samples, minimum=1)
     fs = _sampling_frequency(fs)
@@ -85,18 +98,22 @@ def choose_settings(n_samples: int, fs: float, n_outputs: int, *, frequency_rang
     reasons = []
     nb_min = max(MIN_BLOCKS, 2 * l + 3)
     if block_rows is None:
-        p_want = math.ceil(LAG_PERIODS * fs / f_low)
+        f_centre = centre_frequency(fs, frequency_range)
+        centre_lags = CENTRE_PERIODS / f_centre if frequency_range is not None else 0.0
+        p_want = math.ceil(max(LAG_PERIODS / f_low, centre_lags) * fs - 1e-9)
+        span = (f"{LAG_PERIODS:g} periods of f_low = {f_low:.3g} Hz" if LAG_PERIODS / f_low >= centre_lags
+                else f"{CENTRE_PERIODS:g} periods of the band's centre {f_centre:.3g} Hz")
         p_min = 1 + math.ceil(MIN_ORDER / l)
         p_rows = MAX_ROWS // l
         p_length = (n_samples + 1) // (2 * BLOCK_SPAN * nb_min + 2)  # nb_min blocks of BLOCK_SPAN (p + q) columns
         p = max(min(p_want, p_rows, p_length), min(p_min, p_length), 2)
         why = f"block_rows = {p}: lags of {p / fs:.3g} s"
         if p == p_want:
-            why += f", {LAG_PERIODS:g} periods of f_low = {f_low:.3g} Hz"
+            why += f", {span}"
         elif p < p_want:
             cap = (f"H is capped at {MAX_ROWS} rows ({l} outputs)" if p == p_rows else
                    f"the record ({n_samples} samples) holds {nb_min} blocks of {BLOCK_SPAN} (p + q) columns only")
-            why += (f", fewer than the {p_want} for {LAG_PERIODS:g} periods of f_low = {f_low:.3g} Hz: {cap}; "
+            why += (f", fewer than the {p_want} for {span}: {cap}; "
                     "decimate, narrow the band or record longer to reach it")
         else:
             why += f", the fewest for order {MIN_ORDER} with {l} outputs"

@@ -196,6 +196,7 @@ def run(args) -> int:
     from .identification import identify
     from .io import load
     from .harmonics import harmonic_kurtosis, possible_harmonics
+    from .horizons import check_horizons
     from .preprocess import preprocess
     from .stabilization import (ClusteringSettings, PoleStatus, StabilityCriteria, select_modes,
                                  stabilization_diagram)
@@ -297,6 +298,19 @@ def run(args) -> int:
         harmonic = (possible_harmonics(y, pre.fs, selected.frequency_hz, selected.damping_ratio)
                     if selected.n_modes else np.zeros(0, bool))
         progress.update()
+        horizons = None
+        if args.check_horizons and selected.n_modes:
+            # the same record at 0.75, 1 and 1.5 times the horizon: a bias from the horizon
+            # does not show in σ, but in how the estimate moves (horizons.py)
+            progress.set_description_str("settings check")
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                horizons = check_horizons(y, u, fs=pre.fs, frequency_range=pre.frequency_range,
+                                          block_rows=result.settings["block_rows"],
+                                          past_block_rows=args.past_block_rows, n_blocks=args.n_blocks,
+                                          references=refs, uncertainty=not args.no_uncertainty, decimate=1,
+                                          criteria=criteria, settings=clustering,
+                                          progress=progress.set_description_str)
 
         # ------------------------------------------------------------------ plots
         written = []
@@ -333,6 +347,16 @@ def run(args) -> int:
                      "warnings": [str(w.message) for w in caught],
                      "possible_harmonics": [{"mode": k + 1, "frequency_hz": float(selected.frequency_hz[k]),
                                              "kurtosis": float(kurt[k])} for k in np.flatnonzero(harmonic)]}
+            if horizons is not None:
+                extra["horizon_check"] = {
+                    "block_rows": list(horizons.block_rows),
+                    "modes": [{"mode": i + 1,
+                               "frequency_hz": [None if not np.isfinite(v) else float(v) for v in horizons.frequency_hz[i]],
+                               "damping_ratio": [None if not np.isfinite(v) else float(v)
+                                                 for v in horizons.damping_ratio[i]],
+                               "frequency_spread": (None if not np.isfinite(horizons.frequency_spread[i])
+                                                    else float(horizons.frequency_spread[i]))}
+                              for i in range(selected.n_modes)]}
             for p in args.out:
                 progress.set_description_str(f"writing {Path(p).name}")
                 try:
@@ -379,6 +403,9 @@ def run(args) -> int:
         print("no mode selected: no cluster of stable poles both reached "
               f"{selected.min_cluster_size} poles and had a frequency std within its bandwidth "
               "(try more orders, a longer record, a narrower band or looser criteria)")
+    if horizons is not None:
+        print()
+        print(horizons)
     # the largest dropped clusters, with why: what a person checks against the diagram
     dropped = sorted(zip(selected.dropped_n_poles, selected.dropped_frequency_hz, selected.dropped_reason),
                      key=lambda t: (-t[0], t[1]))
@@ -453,11 +480,12 @@ def register(subparsers) -> argparse.ArgumentParser:
     g.add_argument("--max-frequency-change", type=float, default=0.01, metavar="FRAC",
                    help="largest relative frequency change between orders (default 0.01)")
     g.add_argument("--max-damping-change", type=float, default=0.10, metavar="FRAC",
-                   help="largest relative damping change between orders (default 0.10)")
+                   help="largest relative damping change between orders, with --damping-std-factor 0 or "
+                        "without uncertainty (default 0.10)")
     g.add_argument("--min-mac", type=float, default=0.98, help="smallest MAC between orders (default 0.98)")
-    g.add_argument("--damping-std-factor", type=float, default=0.0, metavar="K",
-                   help="judge a damping change between orders against K x its combined std instead of "
-                        "--max-damping-change (default 0: the relative test)")
+    g.add_argument("--damping-std-factor", type=float, default=2.0, metavar="K",
+                   help="judge a damping change between orders against K x its combined std (default 2; "
+                        "0: the relative test --max-damping-change)")
     g.add_argument("--match-window", type=float, default=0.05, metavar="FRAC",
                    help="a pole is compared only with poles of the previous order within this relative "
                         "frequency distance (default 0.05)")
@@ -475,6 +503,9 @@ def register(subparsers) -> argparse.ArgumentParser:
     g.add_argument("--plot", metavar="IMAGE", default=None,
                    help="write the stabilization diagram over the output spectrum (.png, .pdf, .svg ...)")
     g.add_argument("--plot-shapes", metavar="IMAGE", default=None, help="write the selected mode shapes with ±1σ")
+    g.add_argument("--check-horizons", action="store_true",
+                   help="also select at 0.75 and 1.5 times block_rows and print each mode's spread across "
+                        "the horizons beside its std (a bias from the horizon does not show in the std)")
     g.add_argument("--nperseg", type=integer_option(8), default=None, metavar="N",
                    help="Welch segment length of the diagram's spectrum, samples after decimation "
                         "(default: the spectrum function's)")

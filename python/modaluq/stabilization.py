@@ -161,14 +161,15 @@ class StabilityCriteria:
       significant at about 95 % even if the two estimates were independent, and estimates at
       consecutive orders from the same data are positively correlated, so the test is
       conservative towards keeping a pole). ``frequency_std_factor=None`` switches it off;
-    - damping stable when ``|Δξ| / |ξ_prev| <= max_damping_change`` (default 0.10 = 10 %: damping
-      ratios are far less precise than frequencies, so the 5 % often used makes physical poles
-      flicker). With ``damping_std_factor=k`` (and uncertainty) instead when
-      ``|Δξ| <= k * sqrt(σ_ξ² + σ_ξ,prev²)`` and ``|Δξ| / |ξ_prev| <= max_damping_change_with_std``
-      (default 0.5, a loose backstop): a damping ratio with σ_ξ = 50 % of ξ moves by more than
-      10 % between orders on noise alone. Not the default yet: without the fixed 10 % more
-      spurious poles pass as stable, and the selection does not yet reject them by their σ
-      (issue 12);
+    - damping stable, with uncertainty, when ``|Δξ| <= damping_std_factor * sqrt(σ_ξ² + σ_ξ,prev²)``
+      (default k = 2) and ``|Δξ| / |ξ_prev| <= max_damping_change_with_std`` (default 0.5, a
+      loose backstop): a damping ratio with σ_ξ = 50 % of ξ moves by more than 10 % between
+      orders on noise alone, so a fixed relative bound breaks the columns of physical modes
+      into pieces (on the shared records the σ test keeps 10–60 % more poles per mode and adds
+      no spurious mode; the clusters of spurious poles it lets through are dropped by their σ,
+      see :class:`ClusteringSettings`). Without uncertainty, or with ``damping_std_factor=None``,
+      ``|Δξ| / |ξ_prev| <= max_damping_change`` (default 0.10 = 10 %; the 5 % often used makes
+      physical poles flicker);
     - shape stable when ``MAC >= min_mac`` (default 0.98).
 
     ``STABLE`` needs all three; frequency alone gives ``STABLE_FREQUENCY``.
@@ -188,7 +189,7 @@ class StabilityCriteria:
     min_damping_ratio, max_damping_ratio : float
         Accepted range of the damping ratio (fraction, 0.02 = 2 %).
     damping_std_factor : float or None
-        k of the σ test on the damping change (e.g. 2), or None (default) for the relative test.
+        k of the σ test on the damping change (default 2), or None for the relative test.
     max_damping_change_with_std : float
         Backstop on the relative damping change when the σ test is used (fraction).
     match_window : float
@@ -202,7 +203,7 @@ class StabilityCriteria:
     max_frequency_cov: float | None = 0.02
     min_damping_ratio: float = 0.0
     max_damping_ratio: float = 0.20
-    damping_std_factor: float | None = None
+    damping_std_factor: float | None = 2.0
     max_damping_change_with_std: float = 0.5
     match_window: float = 0.05
 
@@ -261,6 +262,28 @@ class ClusteringSettings:
         claims. A structural mode identified from a record of ``T`` seconds has about
         ``1 / sqrt(2π f T ξ)`` (0.05–0.4 on the shared records), while spurious poles, whose σ
         the noise directions inflate, have 2–5. None switches it off; skipped without uncertainty.
+    merge_fragments : bool
+        Join clusters that are pieces of one mode (default True; skipped without uncertainty):
+        median frequencies within ``fragment_std_factor`` (default 3) combined σ_f, shapes with
+        MAC >= ``fragment_min_mac`` (default 0.8), and at most ``fragment_max_shared`` (default
+        0.25) of the smaller piece's orders in common. A mode has one pole per order, so two
+        clusters present at the same orders are two modes, however close (a fore-aft/side-side
+        pair of a tower); pieces arise where a mode's shape varies with the order (close modes,
+        few sensors) and the frequency-and-MAC distance splits its column into parts each too
+        small to be selected (the wind turbine's 1.6 Hz column, docs/settings.md).
+    fragment_std_factor, fragment_min_mac, fragment_max_shared : float
+        See ``merge_fragments``.
+    drop_doublets : bool
+        Drop the later of two selected clusters within ``doublet_window`` (default 0.05 = 5 %)
+        in frequency whose shapes have MAC >= ``doublet_min_mac`` (default 0.8). Above the true
+        order one mode is often fitted by a pair of poles with the same shape, the twin a few
+        per cent away and often lightly damped; the twin appears at higher orders than the mode.
+        "Later": the higher first order, then fewer poles. On the paper's chain, output-only,
+        this removes the twins selected in about a third of the records (docs/settings.md);
+        two physical modes that close and that alike in shape are not told apart by the
+        sensors anyway. The dropped twin is listed with its reason.
+    doublet_window, doublet_min_mac : float
+        See ``drop_doublets``.
     statuses : tuple of PoleStatus
         Which poles are clustered (default only ``STABLE``).
     linkage : str
@@ -274,6 +297,13 @@ class ClusteringSettings:
     min_cluster_fraction: float = 0.25
     per_cluster_min_size: bool = False
     max_frequency_std_per_bandwidth: float | None = 1.0
+    merge_fragments: bool = True
+    drop_doublets: bool = True
+    doublet_window: float = 0.05
+    doublet_min_mac: float = 0.8
+    fragment_std_factor: float = 3.0
+    fragment_min_mac: float = 0.8
+    fragment_max_shared: float = 0.25
     statuses: tuple = (PoleStatus.STABLE,)
     linkage: str = "average"
 
@@ -284,8 +314,14 @@ class ClusteringSettings:
         _real("min_cluster_fraction", self.min_cluster_fraction, low=0, high=1, low_open=True)
         _real("max_frequency_std_per_bandwidth", self.max_frequency_std_per_bandwidth, low=0, low_open=True,
               allow_none=True)
-        if not isinstance(self.per_cluster_min_size, (bool, np.bool_)):
-            raise TypeError(f"per_cluster_min_size must be True or False; got {self.per_cluster_min_size!r}")
+        for name in ("per_cluster_min_size", "merge_fragments", "drop_doublets"):
+            if not isinstance(getattr(self, name), (bool, np.bool_)):
+                raise TypeError(f"{name} must be True or False; got {getattr(self, name)!r}")
+        _real("doublet_window", self.doublet_window, low=0)
+        _real("doublet_min_mac", self.doublet_min_mac, low=0, high=1)
+        _real("fragment_std_factor", self.fragment_std_factor, low=0)
+        _real("fragment_min_mac", self.fragment_min_mac, low=0, high=1)
+        _real("fragment_max_shared", self.fragment_max_shared, low=0, high=1)
         if isinstance(self.statuses, (str, PoleStatus)):
             object.__setattr__(self, "statuses", (self.statuses,))
         try:
@@ -303,6 +339,10 @@ class ClusteringSettings:
                 "min_cluster_fraction": self.min_cluster_fraction,
                 "per_cluster_min_size": bool(self.per_cluster_min_size),
                 "max_frequency_std_per_bandwidth": self.max_frequency_std_per_bandwidth,
+                "merge_fragments": bool(self.merge_fragments), "drop_doublets": bool(self.drop_doublets),
+                "doublet_window": self.doublet_window, "doublet_min_mac": self.doublet_min_mac,
+                "fragment_std_factor": self.fragment_std_factor,
+                "fragment_min_mac": self.fragment_min_mac, "fragment_max_shared": self.fragment_max_shared,
                 "statuses": [s.value for s in self.statuses], "linkage": self.linkage}
 
     def _to_core(self):
@@ -313,6 +353,13 @@ class ClusteringSettings:
         c.per_cluster_min_size = bool(self.per_cluster_min_size)
         c.max_frequency_std_per_bandwidth = (None if self.max_frequency_std_per_bandwidth is None
                                              else float(self.max_frequency_std_per_bandwidth))
+        c.merge_fragments = bool(self.merge_fragments)
+        c.drop_doublets = bool(self.drop_doublets)
+        c.doublet_window = float(self.doublet_window)
+        c.doublet_min_mac = float(self.doublet_min_mac)
+        c.fragment_std_factor = float(self.fragment_std_factor)
+        c.fragment_min_mac = float(self.fragment_min_mac)
+        c.fragment_max_shared = float(self.fragment_max_shared)
         c.statuses = [_CORE_OF_STATUS[s] for s in self.statuses]
         c.linkage = getattr(_core.Linkage, self.linkage)
         return c

@@ -21,7 +21,8 @@ struct P {
     bool coupled = false;
 };
 
-const std::vector<std::vector<double>> kShapes = {{1.0, 0.5, -0.3}, {0.2, -0.7, 1.0}, {0.6, 1.0, 0.4}};
+// 0 and 3 have MAC 0.88: one mode whose shape varies with the order, or two close modes
+const std::vector<std::vector<double>> kShapes = {{1.0, 0.5, -0.3}, {0.2, -0.7, 1.0}, {0.6, 1.0, 0.4}, {1.0, 0.5, 0.1}};
 
 // Poles of the given orders (each order's poles sorted by frequency, as identify gives them).
 modaluq::Poles make_poles(const std::map<Index, std::vector<P>>& by_order, bool with_std = true) {
@@ -96,7 +97,12 @@ TEST_CASE("stabilization: statuses and reasons follow the documented rules") {
     CHECK(reason(4, 20.0) == "frequency std/f 2.5 % > 2 %");
 
     CHECK(status(6, 10.01) == PoleStatus::stable_frequency);
-    CHECK(reason(6, 10.01) == "damping change 25 % > 10 % (vs order 4)");
+    // default: the damping change against 2 combined sigma (sigma_xi = 5 % of xi here)
+    CHECK(reason(6, 10.01) == "damping change 0.005 > 2 x combined std 0.0016 (vs order 4)");
+    modaluq::StabilityCriteria relative;
+    relative.damping_std_factor.reset();
+    const auto d_rel = modaluq::stabilization_diagram(p, relative);
+    CHECK(d_rel.reason[find(d_rel, 6, 10.01)] == "damping change 25 % > 10 % (vs order 4)");
     // 10.3 Hz matches the 10.01 Hz pole (within the window) but moves 2.9 %, 20 combined sigma
     CHECK(status(6, 10.3) == PoleStatus::unstable);
     const Index i103 = find(d, 6, 10.3);
@@ -123,9 +129,10 @@ TEST_CASE("stabilization: sigma tests, a band, and no uncertainty") {
     }
     SUBCASE("damping judged against its sigma replaces the fixed 10 %") {
         const auto p = make_poles({{2, {{10.0, 0.020, 0, -1, 0.004}}}, {4, {{10.0, 0.026, 0, -1, 0.004}}}});
-        CHECK(modaluq::stabilization_diagram(p).status[1] == PoleStatus::stable_frequency);  // +30 %
         modaluq::StabilityCriteria c;
-        c.damping_std_factor = 2.0;  // |dxi| = 0.006 < 2 * 0.0057
+        c.damping_std_factor.reset();  // the relative test: +30 % > 10 %
+        CHECK(modaluq::stabilization_diagram(p, c).status[1] == PoleStatus::stable_frequency);
+        c.damping_std_factor = 2.0;  // the default: |dxi| = 0.006 < 2 * 0.0057
         auto d = modaluq::stabilization_diagram(p, c);
         CHECK(d.status[1] == PoleStatus::stable);
         c.max_damping_change_with_std = 0.25;  // the backstop
@@ -335,4 +342,64 @@ TEST_CASE("selection: the per-cluster minimum size counts the orders from the cl
     const auto s = modaluq::select_modes(d, o);
     CHECK(s.n_modes() == 2);
     CHECK(s.min_cluster_size == 3);
+}
+
+TEST_CASE("selection: pieces of one mode are joined, two modes at the same orders are not") {
+    auto select = [](const std::map<Index, std::vector<P>>& by_order, bool merge) {
+        const auto poles = make_poles(by_order);
+        modaluq::Diagram d;
+        d.poles = poles;
+        d.status.assign(std::size_t(poles.size()), PoleStatus::stable);
+        modaluq::ClusteringOptions o;
+        o.merge_fragments = merge;
+        o.drop_doublets = false;  // tested below
+        o.min_cluster_size = 12;
+        return modaluq::select_modes(d, o);
+    };
+    // one mode at 10 Hz whose shape changes between orders 20 and 22: two pieces of 10 poles
+    std::map<Index, std::vector<P>> pieces;
+    for (Index n = 2; n <= 40; n += 2) pieces[n] = {{10.0 + 1e-3 * double(n % 4), 0.02, n <= 20 ? 0 : 3}};
+    CHECK(select(pieces, false).n_modes() == 0);  // each piece alone is too small
+    const auto joined = select(pieces, true);
+    REQUIRE(joined.n_modes() == 1);
+    CHECK(joined.n_poles(0) == 20);
+    // two modes 0.05 % apart with the same shapes, present at the same orders: never joined
+    std::map<Index, std::vector<P>> pair;
+    for (Index n = 2; n <= 40; n += 2) pair[n] = {{10.0, 0.02, 0}, {10.005, 0.02, 3}};
+    const auto two = select(pair, true);
+    CHECK(two.n_modes() == 2);
+    // a piece farther than 3 combined sigma is another mode
+    std::map<Index, std::vector<P>> apart;
+    for (Index n = 2; n <= 40; n += 2) apart[n] = {{n <= 20 ? 10.0 : 10.1, 0.02, n <= 20 ? 0 : 3}};
+    CHECK(select(apart, true).n_modes() == 0);
+}
+
+TEST_CASE("selection: the later of two alike clusters a few per cent apart is dropped as a twin") {
+    // a mode at 10 Hz from order 2; from order 20 a twin at 10.3 Hz with a shape of MAC 0.88,
+    // lightly damped; and a mode at 10.2 Hz of another shape (MAC 0.10) from order 10
+    std::map<Index, std::vector<P>> by_order;
+    for (Index n = 2; n <= 40; n += 2) {
+        by_order[n] = {{10.0, 0.02, 0}};
+        if (n >= 10) by_order[n].push_back({10.2, 0.02, 1});
+        if (n >= 20) by_order[n].push_back({10.3, 0.003, 3});
+    }
+    const auto poles = make_poles(by_order);
+    modaluq::Diagram d;
+    d.poles = poles;
+    d.status.assign(std::size_t(poles.size()), PoleStatus::stable);
+    modaluq::ClusteringOptions o;
+    o.min_cluster_size = 5;
+    const auto s = modaluq::select_modes(d, o);
+    REQUIRE(s.n_modes() == 2);
+    CHECK(s.frequency_hz(0) == doctest::Approx(10.0));
+    CHECK(s.frequency_hz(1) == doctest::Approx(10.2));
+    REQUIRE(s.dropped_reason.size() == 1);
+    CHECK(s.dropped_frequency_hz(0) == doctest::Approx(10.3));
+    CHECK(s.dropped_reason[0] == "a twin of the 10 Hz mode: same shape (MAC 0.88), 3 % away, from order 20 "
+                                 "(the mode from order 2)");
+    o.drop_doublets = false;
+    CHECK(modaluq::select_modes(d, o).n_modes() == 3);
+    o.drop_doublets = true;
+    o.doublet_window = 0.02;
+    CHECK(modaluq::select_modes(d, o).n_modes() == 3);
 }

@@ -193,6 +193,74 @@ def _default_min_cluster_size(diagram: Diagram, in_set: np.ndarray, fraction: fl
     return max(3, int(math.ceil(fraction * n_after - 1e-9)))
 
 
+def _merge_fragments(clusters, diagram, thin, settings):
+    """Join pieces of one mode: largest first (ties: lowest first pole), within
+    fragment_std_factor combined σ, MAC >= fragment_min_mac, few orders shared; until none joins."""
+    f = diagram.frequency_hz
+    clusters = [np.sort(np.asarray(c, dtype=np.int64)) for c in clusters]
+
+    def summary(c):
+        one = thin(c)
+        med = float(np.median(f[one]))
+        sd = diagram.frequency_std[one]
+        sd = sd[np.isfinite(sd)]
+        rep = one[np.argmin(np.abs(f[one] - med))]
+        return med, float(np.median(sd)) if sd.size else 0.0, rep, set(diagram.order[one].tolist()), one.size
+
+    joined = True
+    while joined:
+        joined = False
+        clusters.sort(key=lambda c: (-c.size, int(c[0])))
+        sums = [summary(c) for c in clusters]
+        for a in range(len(clusters)):
+            for b in range(a + 1, len(clusters)):
+                fa, sa, ra, oa, na = sums[a]
+                fb, sb, rb, ob, nb = sums[b]
+                if not abs(fa - fb) <= settings.fragment_std_factor * math.hypot(sa, sb):
+                    continue
+                if modal_assurance_criterion(diagram.mode_shape[:, ra], diagram.mode_shape[:, rb])[0, 0] < \
+                        settings.fragment_min_mac:
+                    continue
+                if len(oa & ob) > settings.fragment_max_shared * min(na, nb):
+                    continue
+                clusters[a] = np.sort(np.concatenate([clusters[a], clusters[b]]))
+                del clusters[b]
+                joined = True
+                break
+            if joined:
+                break
+    return clusters
+
+
+def _drop_doublets(kept, diagram, settings, dropped):
+    """In order of (first order, -size, first pole): drop a cluster within doublet_window of an
+    earlier survivor whose median-nearest pole has MAC >= doublet_min_mac with its own."""
+    f = diagram.frequency_hz
+    items = []
+    for m in kept:
+        med = float(np.median(f[m]))
+        items.append((int(diagram.order[m].min()), -m.size, int(m[0]), med, m[np.argmin(np.abs(f[m] - med))], m))
+    items.sort(key=lambda t: t[:3])
+    survivors, out = [], []
+    for first, neg_n, _, med, rep, m in items:
+        twin = None
+        for s_first, s_med, s_rep in survivors:
+            if abs(med - s_med) / max(med, s_med) > settings.doublet_window:
+                continue
+            mac = modal_assurance_criterion(diagram.mode_shape[:, rep], diagram.mode_shape[:, s_rep])[0, 0]
+            if mac >= settings.doublet_min_mac:
+                twin = (s_first, s_med, mac)
+                break
+        if twin is None:
+            survivors.append((first, med, rep))
+            out.append(m)
+        else:
+            dropped.append((med, -neg_n, f"a twin of the {twin[1]:.4g} Hz mode: same shape (MAC {twin[2]:.2f}), "
+                                          f"{100 * abs(med - twin[1]) / twin[1]:.3g} % away, from order {first} "
+                                          f"(the mode from order {twin[0]})"))
+    return out
+
+
 def select_modes_reference(diagram: Diagram, settings: ClusteringSettings | None = None, **kwargs) -> SelectedModes:
     """The selection written with SciPy's clustering (see modaluq.select_modes for the rules)."""
     import scipy.cluster.hierarchy as sch
@@ -237,15 +305,20 @@ def select_modes_reference(diagram: Diagram, settings: ClusteringSettings | None
 
     check_bandwidth = settings.max_frequency_std_per_bandwidth is not None and diagram.has_uncertainty
     smallest = min_size
-    kept, dropped = [], []
-    for members in clusters:
-        med = np.median(f[members])
+    def thin(members):
         # one pole per order: the one nearest to the median frequency (ties: lower index)
+        med = np.median(f[members])
         keep = []
         for n in np.unique(order[members]):
             at_n = members[order[members] == n]
             keep.append(at_n[np.argmin(np.abs(f[at_n] - med))])
-        members = np.sort(np.asarray(keep, dtype=np.int64))
+        return np.sort(np.asarray(keep, dtype=np.int64))
+
+    if settings.merge_fragments and diagram.has_uncertainty:
+        clusters = _merge_fragments(clusters, diagram, thin, settings)
+    kept, dropped = [], []
+    for members in clusters:
+        members = thin(members)
         need = min_size
         if settings.min_cluster_size is None and settings.per_cluster_min_size:
             first = int(order[members].min())
@@ -262,6 +335,8 @@ def select_modes_reference(diagram: Diagram, settings: ClusteringSettings | None
         else:
             kept.append(members)
 
+    if settings.drop_doublets:
+        kept = _drop_doublets(kept, diagram, settings, dropped)
     kept.sort(key=lambda m: float(np.median(f[m])))
     dropped.sort()
     n_out = diagram.n_outputs
@@ -282,21 +357,27 @@ def select_modes_reference(diagram: Diagram, settings: ClusteringSettings | None
         candidates = members[~(diagram.close_singular_values[members] | diagram.noise_coupled[members])]
         if candidates.size == 0:
             candidates = members
-        # nearest to the median; ties -> higher order (candidates ascend in order, take last)
-        gap = np.abs(f[candidates] - med)
-        rep[k] = candidates[np.flatnonzero(gap == gap.min())[-1]]
-        # σ robust to the order it is read at: the median over the cluster's reliable poles
-        # (the representative's own σ is that of one order, which above the true order varies)
-        reliable = members[~(diagram.close_singular_values[members] | diagram.noise_coupled[members])
-                           & np.isfinite(diagram.frequency_std[members])]
+        ddof = 1 if members.size > 1 else 0
+        f_spread[k] = np.std(f[members], ddof=ddof)
+        xi_spread[k] = np.std(xi[members], ddof=ddof)
+        finite = np.isfinite(diagram.frequency_std[members]) & np.isfinite(diagram.damping_std[members])
+        unflagged = ~(diagram.close_singular_values[members] | diagram.noise_coupled[members])
+        reliable, with_std = members[finite & unflagged], members[finite]
+
+        def scale(std, spread):
+            x = (np.median(std[reliable]) if reliable.size else np.median(std[with_std]) if with_std.size
+                 else spread)
+            return x if np.isfinite(x) and x > 0 else 1.0
+
+        sc_f = scale(diagram.frequency_std, f_spread[k])
+        sc_xi = scale(diagram.damping_std, xi_spread[k])
+        dist = ((f[candidates] - med) / sc_f) ** 2 + ((xi[candidates] - np.median(xi[members])) / sc_xi) ** 2
+        rep[k] = candidates[np.flatnonzero(dist == dist.min())[-1]]  # ties -> the higher order
         if reliable.size:
             sf_med[k] = np.median(diagram.frequency_std[reliable])
             sxi_med[k] = np.median(diagram.damping_std[reliable])
         else:
             sf_med[k], sxi_med[k] = diagram.frequency_std[rep[k]], diagram.damping_std[rep[k]]
-        ddof = 1 if members.size > 1 else 0
-        f_spread[k] = np.std(f[members], ddof=ddof)
-        xi_spread[k] = np.std(xi[members], ddof=ddof)
         ref = int(np.argmax(np.abs(shape[:, rep[k]])))
         aligned = shape[:, members] / shape[ref, members][None, :]
         sh_spread_r[:, k] = np.std(aligned.real, axis=1, ddof=ddof)

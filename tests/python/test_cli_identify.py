@@ -329,3 +329,19 @@ def test_errors_are_one_line_when_run_as_a_module(small_csv):
     assert proc.returncode == 2
     assert proc.stderr.strip().splitlines() == [
         f"modaluq identify: error: --out {small_csv} is the input file {small_csv}; refusing to overwrite it"]
+
+
+def test_cli_check_horizons_prints_the_spread_and_writes_it_to_json(tmp_path, capsys):
+    import json
+
+    sim = modaluq.simulate(30_000, seed=2)
+    path = tmp_path / "rec.npz"
+    np.savez(path, y=sim.y, u=sim.u, fs=sim.fs)
+    out = tmp_path / "modes.json"
+    assert main(["identify", str(path), "--frequency-range", "1", "20", "--check-horizons", "--no-progress",
+                 "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "settings check: block_rows 75, 100, 150" in text and "(spread: across the horizons)" in text
+    check = json.loads(out.read_text())["horizon_check"]
+    assert check["block_rows"] == [75, 100, 150]
+    assert len(check["modes"]) == 6 and all(len(m["frequency_hz"]) == 3 for m in check["modes"])

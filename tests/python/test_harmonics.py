@@ -44,3 +44,20 @@ def test_light_damping_lowers_the_bar_and_bad_arguments_are_named():
     with pytest.raises(ValueError, match="relative_bandwidth"):
         harmonic_kurtosis(y, 50.0, [5.0], relative_bandwidth=0.0)
     assert 1.5 < HARMONIC_KURTOSIS < 3.0
+
+
+def test_a_lightly_damped_mode_is_flagged_only_beside_a_family_of_a_clear_harmonic():
+    """Kurtosis 2.2-2.6 with ξ < 0.5 % is within the estimate's noise of a Gaussian mode: it is
+    flagged only at an integer multiple of a frequency whose kurtosis alone says "sinusoid"."""
+    from unittest import mock
+
+    from modaluq import harmonics
+
+    kurt = np.array([1.6, 2.5, 2.5, 2.5])          # a clear line, then three borderline values
+    f = np.array([0.8, 1.6, 2.0, 3.2])              # 2x and 4x the line; 2.0 Hz is 2.5x
+    xi = np.array([0.0003, 0.003, 0.003, 0.02])     # the 3.2 Hz pole is not lightly damped
+    with mock.patch.object(harmonics, "harmonic_kurtosis", return_value=kurt):
+        flags = harmonics.possible_harmonics(np.zeros((100, 1)), 50.0, f, xi)
+    assert flags.tolist() == [True, True, False, False]
+    with mock.patch.object(harmonics, "harmonic_kurtosis", return_value=np.array([2.54])):
+        assert not harmonics.possible_harmonics(np.zeros((100, 1)), 50.0, [1.17], [0.004])[0]

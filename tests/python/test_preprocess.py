@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 import modaluq
-from modaluq.auto_settings import BLOCK_SPAN, LAG_PERIODS, MAX_BLOCKS, MAX_ROWS, choose_settings, lag_warning
+from modaluq.auto_settings import (BLOCK_SPAN, CENTRE_PERIODS, LAG_PERIODS, MAX_BLOCKS, MAX_ROWS, choose_settings,
+                                   lag_warning)
 from modaluq.cli import main
 from modaluq.preprocess import decimation_factor, preprocess
 from modaluq.stabilization import PoleStatus
@@ -75,12 +76,24 @@ def test_inputs_are_processed_like_the_outputs():
 
 
 def test_lags_span_two_periods_of_the_band_and_blocks_half_a_decay_time():
-    s = choose_settings(100_000, 50.0, 3, frequency_range=(1.0, 20.0))
-    assert s.block_rows == math.ceil(LAG_PERIODS * 50.0 / 1.0) == 100
+    # a wide band (f_high / f_low >= 25): two periods of f_low are the longer of the two spans
+    s = choose_settings(100_000, 100.0, 1, frequency_range=(1.0, 30.0))
+    assert s.block_rows == math.ceil(LAG_PERIODS * 100.0 / 1.0) == 200
     assert s.orders == tuple(range(2, 101, 2))
     decay = 1 / (2 * np.pi * 1.0 * 0.01)
-    assert s.n_blocks == min(int((100_000 / 50.0) // (0.5 * decay)), MAX_BLOCKS)
+    assert s.n_blocks == min(int((100_000 / 100.0) // (0.5 * decay)), MAX_BLOCKS)
     assert len(s.reasons) == 3 and "2 periods of f_low = 1 Hz" in s.reasons[0]
+
+
+def test_lags_of_a_narrow_band_span_ten_periods_of_its_centre():
+    """The smartphone slab's band 10-30 Hz at 106 Hz: 2 periods of 10 Hz are 22 rows, 10 periods of
+    the centre sqrt(10 * 30) = 17.3 Hz are 62; the longer wins (docs/settings.md: the 17.2 and
+    17.8 Hz modes are resolved from about 60 rows on)."""
+    s = choose_settings(16_384, 106.25, 3, frequency_range=(10.0, 30.0))
+    assert s.block_rows == math.ceil(CENTRE_PERIODS * 106.25 / math.sqrt(10.0 * 30.0)) == 62
+    assert "10 periods of the band's centre 17.3 Hz" in s.reasons[0]
+    # without a band only the first rule counts: f_low = fs / 20, two periods = 40 rows
+    assert choose_settings(16_384, 106.25, 3).block_rows == 40
 
 
 def test_settings_are_capped_by_the_size_of_h_and_the_record():

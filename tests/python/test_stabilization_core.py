@@ -128,8 +128,36 @@ def test_nearest_neighbour_chain_equals_scipy_on_random_points():
             opt = _core.ClusteringOptions()
             opt.distance_threshold = t
             opt.min_cluster_size = 1
+            opt.merge_fragments = False  # equal shapes: only the clustering itself is compared
+            opt.drop_doublets = False
             opt.linkage = getattr(_core.Linkage, method)
             sel = _core.select_modes(diagram, opt)
             core_partition = sorted(tuple(m) for m in sel.members)
             ref_partition = sorted(tuple(np.flatnonzero(labels == k)) for k in np.unique(labels))
             assert core_partition == ref_partition, (trial, method)
+
+
+def test_core_joins_the_pieces_of_a_mode_as_the_reference_does():
+    """Hand-made diagrams where the clustering splits one mode into pieces (its shape changes with
+    the order) beside a close pair present at the same orders: core and reference agree, the
+    pieces are joined and the pair is not."""
+    from test_stabilization import make_result, pole
+
+    shape_a, shape_b = (1.0, 0.5, -0.3), (1.0, 0.5, 0.1)  # MAC 0.88
+    by_order = {}
+    for n in range(2, 41, 2):
+        by_order[n] = [pole(10.0 + 1e-3 * (n % 4), shape=shape_a if n <= 20 else shape_b),
+                       pole(20.0, shape=shape_a), pole(20.01, shape=shape_b)]
+    diagram = modaluq.stabilization_diagram(make_result(by_order), max_frequency_change=0.05,
+                                            frequency_std_factor=None, min_mac=0.8)
+    for merge in (True, False):
+        for doublets in (True, False):
+            kw = dict(merge_fragments=merge, drop_doublets=doublets, min_cluster_size=12)
+            assert_same_selection(modaluq.select_modes(diagram, **kw), select_modes_reference(diagram, **kw))
+    joined = modaluq.select_modes(diagram, min_cluster_size=12, drop_doublets=False)
+    np.testing.assert_allclose(joined.frequency_hz, [10.0, 20.0, 20.01], atol=2e-3)
+    assert list(joined.n_poles) == [19, 19, 19]  # orders 4..40: the lowest order has nothing to compare with
+    # the pair at 20 / 20.01 Hz has alike shapes (MAC 0.88): by default the one listed second is a twin
+    default = modaluq.select_modes(diagram, min_cluster_size=12)
+    np.testing.assert_allclose(default.frequency_hz, [10.0, 20.0], atol=2e-3)
+    assert any(r.startswith("a twin of the 20 Hz mode") for r in default.dropped_reason)

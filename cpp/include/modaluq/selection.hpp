@@ -8,6 +8,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <iterator>
 #include <limits>
 #include <optional>
 #include <string>
@@ -38,6 +39,23 @@ struct ClusteringOptions {
     /// 1 / sqrt(2 pi f T xi) for a record of T s), while spurious poles, whose sigma the noise
     /// directions inflate, typically have 2-5. Empty: no such test; skipped without uncertainty.
     std::optional<double> max_frequency_std_per_bandwidth = 1.0;
+    /// Join clusters that are pieces of one mode: frequencies within fragment_std_factor combined
+    /// sigma, shapes with MAC >= fragment_min_mac, and (a mode has one pole per order) at most
+    /// fragment_max_shared of the smaller piece's orders in common. Two modes present at the same
+    /// orders, however close, stay apart. Skipped without uncertainty.
+    bool merge_fragments = true;
+    /// Drop the later of two selected clusters within doublet_window in frequency whose shapes
+    /// have MAC >= doublet_min_mac: above the true order one mode is often fitted by a pair of
+    /// poles with the same shape (its twin a few per cent away, often lightly damped), and the
+    /// twin appears at higher orders than the mode. "Later": the higher first order, then fewer
+    /// poles. Two physical modes so close and so alike in shape are not told apart by the
+    /// sensors anyway; the dropped twin is listed with its reason.
+    bool drop_doublets = true;
+    double doublet_window = 0.05;
+    double doublet_min_mac = 0.8;
+    double fragment_std_factor = 3.0;
+    double fragment_min_mac = 0.8;
+    double fragment_max_shared = 0.25;
     std::vector<PoleStatus> statuses{PoleStatus::stable};  ///< which poles are clustered
     Linkage linkage = Linkage::average;  ///< see detail/linkage.hpp
 
@@ -49,6 +67,16 @@ struct ClusteringOptions {
         detail::require(min_cluster_fraction > 0.0 && min_cluster_fraction <= 1.0,
                         "min_cluster_fraction must be in (0, 1], got ", min_cluster_fraction);
         detail::require(!statuses.empty(), "statuses must not be empty");
+        detail::require(std::isfinite(doublet_window) && doublet_window >= 0.0,
+                        "doublet_window must be finite and >= 0, got ", doublet_window);
+        detail::require(doublet_min_mac >= 0.0 && doublet_min_mac <= 1.0, "doublet_min_mac must be in [0, 1], got ",
+                        doublet_min_mac);
+        detail::require(std::isfinite(fragment_std_factor) && fragment_std_factor >= 0.0,
+                        "fragment_std_factor must be finite and >= 0, got ", fragment_std_factor);
+        detail::require(fragment_min_mac >= 0.0 && fragment_min_mac <= 1.0, "fragment_min_mac must be in [0, 1], got ",
+                        fragment_min_mac);
+        detail::require(fragment_max_shared >= 0.0 && fragment_max_shared <= 1.0,
+                        "fragment_max_shared must be in [0, 1], got ", fragment_max_shared);
         if (max_frequency_std_per_bandwidth)
             detail::require(*max_frequency_std_per_bandwidth > 0.0, "max_frequency_std_per_bandwidth must be > 0, got ",
                             *max_frequency_std_per_bandwidth);
@@ -106,6 +134,119 @@ inline double sample_std(const std::vector<double>& x, int ddof) {
     return std::sqrt(ss / double(Index(x.size()) - ddof));
 }
 
+/// Join the clusters that are pieces of one mode (ClusteringOptions::merge_fragments): largest
+/// first, each absorbs every other cluster that sits within fragment_std_factor combined sigma
+/// in frequency (median frequency, median sigma_f), has a shape with MAC >= fragment_min_mac
+/// (poles nearest to the medians) and shares at most fragment_max_shared of the smaller
+/// piece's orders; repeated until nothing joins. Pieces arise where the shape of a mode varies
+/// with the order (close modes, few sensors) and the frequency-and-MAC distance splits its
+/// column; each piece alone may be too small to be selected.
+template <class Thin>
+std::vector<std::vector<Index>> merge_fragments(std::vector<std::vector<Index>> clusters, const Poles& P,
+                                                const Thin& thin, const ClusteringOptions& o) {
+    struct Summary {
+        double f, sigma;
+        Index rep;
+        std::vector<Index> orders;
+    };
+    auto summarise = [&](const std::vector<Index>& all) {
+        const std::vector<Index> one = thin(all);
+        std::vector<double> fv, sv;
+        for (Index i : one) {
+            fv.push_back(P.frequency_hz(i));
+            if (std::isfinite(P.frequency_std(i))) sv.push_back(P.frequency_std(i));
+        }
+        Summary s{median(fv), sv.empty() ? 0.0 : median(sv), one[0], {}};
+        for (Index i : one) {
+            if (std::abs(P.frequency_hz(i) - s.f) < std::abs(P.frequency_hz(s.rep) - s.f)) s.rep = i;
+            s.orders.push_back(P.order(i));
+        }
+        return s;
+    };
+    for (bool joined = true; joined;) {
+        joined = false;
+        std::sort(clusters.begin(), clusters.end(), [](const auto& a, const auto& b) {
+            return a.size() != b.size() ? a.size() > b.size() : a.front() < b.front();
+        });
+        std::vector<Summary> sum;
+        for (const auto& c : clusters) sum.push_back(summarise(c));
+        for (std::size_t a = 0; a < clusters.size() && !joined; ++a)
+            for (std::size_t b = a + 1; b < clusters.size(); ++b) {
+                const Summary &A = sum[a], &B = sum[b];
+                if (!(std::abs(A.f - B.f) <= o.fragment_std_factor * std::hypot(A.sigma, B.sigma))) continue;
+                if (mac_pair(P.mode_shape.col(A.rep), P.mode_shape.col(B.rep)) < o.fragment_min_mac) continue;
+                std::vector<Index> shared;
+                std::set_intersection(A.orders.begin(), A.orders.end(), B.orders.begin(), B.orders.end(),
+                                      std::back_inserter(shared));
+                const double smaller = double(std::min(A.orders.size(), B.orders.size()));
+                if (double(shared.size()) > o.fragment_max_shared * smaller) continue;
+                std::vector<Index> u;
+                std::merge(clusters[a].begin(), clusters[a].end(), clusters[b].begin(), clusters[b].end(),
+                           std::back_inserter(u));
+                clusters[a] = std::move(u);
+                clusters.erase(clusters.begin() + std::ptrdiff_t(b));
+                joined = true;
+                break;
+            }
+    }
+    return clusters;
+}
+
+/// ClusteringOptions::drop_doublets on the kept clusters (each one pole per order): in order of
+/// first order, then size (larger first), then first pole, a cluster is dropped when an
+/// earlier kept one lies within doublet_window in frequency with MAC >= doublet_min_mac between
+/// the poles nearest to the two medians. `drop(f, n, reason)` records each.
+template <class Drop>
+std::vector<std::vector<Index>> drop_doublets(std::vector<std::vector<Index>> kept, const Poles& P,
+                                              const ClusteringOptions& o, const Drop& drop) {
+    struct Item {
+        double f;
+        Index first, n, rep;
+        std::size_t at;
+    };
+    std::vector<Item> items;
+    for (std::size_t k = 0; k < kept.size(); ++k) {
+        std::vector<double> fv;
+        Index first = P.order(kept[k].front());
+        for (Index i : kept[k]) {
+            fv.push_back(P.frequency_hz(i));
+            first = std::min(first, P.order(i));
+        }
+        const double f = median(fv);
+        Index rep = kept[k].front();
+        for (Index i : kept[k])
+            if (std::abs(P.frequency_hz(i) - f) < std::abs(P.frequency_hz(rep) - f)) rep = i;
+        items.push_back({f, first, Index(kept[k].size()), rep, k});
+    }
+    std::sort(items.begin(), items.end(), [&](const Item& a, const Item& b) {
+        if (a.first != b.first) return a.first < b.first;
+        if (a.n != b.n) return a.n > b.n;
+        return kept[a.at].front() < kept[b.at].front();
+    });
+    std::vector<Item> survivors;
+    std::vector<std::vector<Index>> out;
+    for (const Item& it : items) {
+        const Item* twin = nullptr;
+        double twin_mac = 0.0;
+        for (const Item& s : survivors) {
+            if (std::abs(it.f - s.f) / std::max(it.f, s.f) > o.doublet_window) continue;
+            const double m = mac_pair(P.mode_shape.col(it.rep), P.mode_shape.col(s.rep));
+            if (m >= o.doublet_min_mac) { twin = &s; twin_mac = m; break; }
+        }
+        if (twin) {
+            drop(it.f, it.n,
+                 "a twin of the " + format_number("%.4g", twin->f) + " Hz mode: same shape (MAC " +
+                     format_number("%.2f", twin_mac) + "), " + percent(std::abs(it.f - twin->f) / twin->f) +
+                     " away, from order " + std::to_string(it.first) + " (the mode from order " +
+                     std::to_string(twin->first) + ")");
+        } else {
+            survivors.push_back(it);
+            out.push_back(std::move(kept[it.at]));
+        }
+    }
+    return out;
+}
+
 }  // namespace detail
 
 /// Group the poles of `diagram` whose status is in options.statuses into modes:
@@ -114,8 +255,9 @@ inline double sample_std(const std::vector<double>& x, int ddof) {
 /// 2. one pole per order in each cluster (the nearest to the cluster's median frequency: a mode
 ///    doubled by a spurious twin stays one cluster);
 /// 3. clusters smaller than the minimum size dropped (kept in dropped_*);
-/// 4. representative: the member nearest to the median frequency among those whose sigma is
-///    meaningful (not at a close cut, not noise-coupled), or among all; ties to the higher order.
+/// 4. representative: the member nearest to the cluster's median frequency and damping ratio
+///    (each in units of its median sigma) among those whose sigma is meaningful (not at a close
+///    cut, not noise-coupled), or among all; ties to the higher order.
 /// Deterministic: no random start, ties broken by order and index.
 inline SelectedModes select_modes(const Diagram& diagram, const ClusteringOptions& options = {}) {
     options.validate();
@@ -189,9 +331,11 @@ inline SelectedModes select_modes(const Diagram& diagram, const ClusteringOption
         bool operator<(const Dropped& o) const { return f < o.f || (f == o.f && n < o.n); }
     };
     std::vector<Dropped> dropped;
-    for (const std::vector<Index>& all : clusters) {
+    // One pole per order: the one nearest to the median frequency (`all` ascends in index,
+    // hence in order).
+    auto thin = [&](const std::vector<Index>& all) {
         const double med = median_f(all);
-        std::vector<Index> one_per_order;  // all ascends in index, hence in order
+        std::vector<Index> one_per_order;
         for (std::size_t a = 0; a < all.size();) {
             std::size_t b = a;
             Index best = all[a];
@@ -200,6 +344,11 @@ inline SelectedModes select_modes(const Diagram& diagram, const ClusteringOption
             one_per_order.push_back(best);
             a = b;
         }
+        return one_per_order;
+    };
+    if (options.merge_fragments && P.has_uncertainty) clusters = detail::merge_fragments(clusters, P, thin, options);
+    for (const std::vector<Index>& all : clusters) {
+        const std::vector<Index> one_per_order = thin(all);
         const Index size = Index(one_per_order.size());
         Index need = min_size;
         if (options.min_cluster_size == 0 && options.per_cluster_min_size) {
@@ -220,6 +369,9 @@ inline SelectedModes select_modes(const Diagram& diagram, const ClusteringOption
         else
             kept.push_back(std::move(one_per_order));
     }
+    if (options.drop_doublets)
+        kept = detail::drop_doublets(std::move(kept), P, options,
+                                     [&](double f0, Index n, std::string why) { dropped.push_back({f0, n, std::move(why)}); });
     std::vector<double> kept_median;
     for (const auto& k : kept) kept_median.push_back(median_f(k));
     std::vector<std::size_t> by_f(kept.size());
@@ -260,23 +412,42 @@ inline SelectedModes select_modes(const Diagram& diagram, const ClusteringOption
         for (Index i : members)
             if (reliable(i)) candidates.push_back(i);
         if (candidates.empty()) candidates = members;
-        Index rep = candidates[0];
-        for (Index i : candidates)  // ascending order: ">=" hands ties to the higher order
-            if (std::abs(f(i) - med) <= std::abs(f(rep) - med)) rep = i;
-        std::vector<double> sf, sxi, fv, xv;
+        std::vector<double> sf, sxi, sf_all, sxi_all, fv, xv;
         for (Index i : members) {
             fv.push_back(f(i));
             xv.push_back(xi(i));
-            if (reliable(i) && std::isfinite(P.frequency_std(i))) {
+            if (!std::isfinite(P.frequency_std(i)) || !std::isfinite(P.damping_std(i))) continue;
+            sf_all.push_back(P.frequency_std(i));
+            sxi_all.push_back(P.damping_std(i));
+            if (reliable(i)) {
                 sf.push_back(P.frequency_std(i));
                 sxi.push_back(P.damping_std(i));
             }
         }
-        s.frequency_std(k) = sf.empty() ? P.frequency_std(rep) : detail::median(sf);
-        s.damping_std(k) = sxi.empty() ? P.damping_std(rep) : detail::median(sxi);
         const int ddof = members.size() > 1 ? 1 : 0;
         s.frequency_spread(k) = detail::sample_std(fv, ddof);
         s.damping_spread(k) = detail::sample_std(xv, ddof);
+        // The representative is the candidate nearest to the cluster's median (f, xi), each
+        // measured in its median sigma (or, without uncertainty, in the cluster's spread): a
+        // pole near the median frequency can still carry an outlying damping ratio.
+        auto scale = [](const std::vector<double>& reliable_std, const std::vector<double>& all_std, double spread) {
+            const double x = !reliable_std.empty() ? detail::median(reliable_std)
+                             : !all_std.empty()    ? detail::median(all_std)
+                                                   : spread;
+            return std::isfinite(x) && x > 0.0 ? x : 1.0;
+        };
+        const double scale_f = scale(sf, sf_all, s.frequency_spread(k));
+        const double scale_xi = scale(sxi, sxi_all, s.damping_spread(k));
+        const double med_xi = detail::median(xv);
+        auto distance = [&](Index i) {
+            const double a = (f(i) - med) / scale_f, b = (xi(i) - med_xi) / scale_xi;
+            return a * a + b * b;
+        };
+        Index rep = candidates[0];
+        for (Index i : candidates)  // ascending order: "<=" hands ties to the higher order
+            if (distance(i) <= distance(rep)) rep = i;
+        s.frequency_std(k) = sf.empty() ? P.frequency_std(rep) : detail::median(sf);
+        s.damping_std(k) = sxi.empty() ? P.damping_std(rep) : detail::median(sxi);
         Index ref = 0;
         P.mode_shape.col(rep).cwiseAbs().maxCoeff(&ref);
         for (Index r = 0; r < l; ++r) {

@@ -52,8 +52,10 @@ struct StabilityCriteria {
     std::optional<double> max_frequency_cov = 0.02;
     double min_damping_ratio = 0.0;       ///< poles below are rejected
     double max_damping_ratio = 0.20;      ///< poles above are rejected
-    /// k of |dxi| <= k sqrt(sxi^2 + sxi_prev^2), replacing the relative damping test; empty: off
-    std::optional<double> damping_std_factor;
+    /// k of |dxi| <= k sqrt(sxi^2 + sxi_prev^2), replacing the relative damping test (a damping
+    /// ratio with sigma_xi = 50 % of xi moves by more than 10 % between orders on noise alone);
+    /// empty: the relative test max_damping_change. Skipped without uncertainty.
+    std::optional<double> damping_std_factor = 2.0;
     double max_damping_change_with_std = 0.5;  ///< backstop on |dxi| / |xi_prev| with the sigma test
     double match_window = 0.05;           ///< largest |df| / f_prev for a pole to be a match at all
     /// band of interest, Hz (low, high): poles outside are rejected; empty: no band
