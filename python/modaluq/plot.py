@@ -54,6 +54,8 @@ def _axes(ax, figsize):
 HORIZONTAL_SHAPES_ABOVE = 6
 #: The spectrum behind a diagram is drawn down to this fraction of its largest value in the band.
 SPECTRUM_DECADES_FLOOR = 1e-6
+#: narrowest shaded ±σ band of a selected mode, as a fraction of the frequency axis
+MIN_BAND_FRACTION = 0.004
 
 
 def stabilization_diagram(diagram, ax=None, *, y=None, spectrum=None, selected=None, show_rejected=True,
@@ -135,8 +137,10 @@ def stabilization_diagram(diagram, ax=None, *, y=None, spectrum=None, selected=N
         if status is not PoleStatus.REJECTED and diagram.has_uncertainty:
             # a noise-coupled pole has no first-order σ: no bar (it is ringed below)
             xerr = np.where(diagram.noise_coupled[mask], 0.0, np.nan_to_num(diagram.frequency_std[mask], nan=0.0))
+        # caps mark the ends of each bar, so a short one still reads as a bar, not as the marker
         h = ax.errorbar(f, n, xerr=xerr, fmt=marker, color=colour, mfc=face, ms=size, lw=0.8,
-                        capsize=0, elinewidth=0.8, label=f"{label} ({int(mask.sum())})", zorder=3)
+                        capsize=1.5 if xerr is not None else 0, elinewidth=0.8,
+                        label=f"{label} ({int(mask.sum())})", zorder=3)
         handles.append(h)
 
     coupled = diagram.noise_coupled & ~diagram.is_status(PoleStatus.REJECTED)
@@ -150,7 +154,16 @@ def stabilization_diagram(diagram, ax=None, *, y=None, spectrum=None, selected=N
         # Mode numbers on top; a number closer than 2 % of the axis to the previous one is
         # raised a line, so that close modes (a tower's bending pair) stay readable.
         last_x, raised = -np.inf, False
+        # Each selected mode's ±σ_f (median over its cluster) as a shaded band, at least
+        # MIN_BAND_FRACTION of the axis wide so that a σ far below a pixel is still seen.
+        min_half = 0.5 * MIN_BAND_FRACTION * (hi - lo)
         for k, fk in enumerate(selected.frequency_hz):
+            sk = float(selected.frequency_std[k]) if np.isfinite(selected.frequency_std[k]) else 0.0
+            if diagram.has_uncertainty:
+                half = max(sk, min_half)
+                ax.axvspan(fk - half, fk + half, color="tab:purple", alpha=0.22, lw=0, zorder=1,
+                           label=(f"selected mode ±1σ_f (at least {100 * MIN_BAND_FRACTION:g} % of the axis)"
+                                  if k == 0 else None))
             ax.axvline(fk, color="k", ls=":", lw=0.8, zorder=2)
             raised = (fk - last_x) < 0.02 * (hi - lo) and not raised
             last_x = fk
@@ -172,7 +185,7 @@ def stabilization_diagram(diagram, ax=None, *, y=None, spectrum=None, selected=N
     kind = "±1σ bars" if diagram.has_uncertainty else "no uncertainty"
     ax.set_title(f"Stabilization diagram ({kind})", fontsize=10, pad=23 if selected is not None else 6)
     if handles:
-        ax.legend(loc="lower right", fontsize=8, framealpha=0.85)
+        ax.legend(loc="lower right", fontsize=8, framealpha=0.85)  # every labelled artist, bands included
     return fig
 
 

@@ -229,3 +229,28 @@ def test_many_channels_get_horizontal_bars_with_one_readable_label_each():
     assert height >= 0.19 * n_out                                          # rows do not overlap
     bars = [p for p in ax.patches]
     assert len(bars) == 2 * n_out
+
+
+def test_selected_modes_get_a_visible_sigma_band_and_pole_bars_have_caps():
+    """σ_f of the chain's modes is far below a pixel on a 1-20 Hz axis: each selected mode gets a
+    shaded ±σ band at least MIN_BAND_FRACTION of the axis wide, centred on the mode."""
+    import matplotlib.patches as mpatches
+
+    from modaluq.plot import MIN_BAND_FRACTION
+
+    sim = modaluq.simulate(30_000, seed=2)
+    result = modaluq.identify(sim.y, sim.u, fs=sim.fs, frequency_range=(1, 20))
+    diagram = result.stabilization_diagram()
+    sel = diagram.select_modes()
+    fig = diagram.plot(selected=sel)
+    ax = fig.axes[0]
+    bands = [p for p in ax.patches if isinstance(p, mpatches.Polygon) or isinstance(p, mpatches.Rectangle)]
+    spans = []
+    for p in bands:
+        x = p.get_xy()[:, 0] if isinstance(p, mpatches.Polygon) else np.array([p.get_x(), p.get_x() + p.get_width()])
+        spans.append((float(x.min()), float(x.max())))
+    assert len(spans) >= sel.n_modes
+    for f, s in zip(sel.frequency_hz, sel.frequency_std):
+        lo, hi = min(spans, key=lambda sp: abs(0.5 * (sp[0] + sp[1]) - f))
+        assert abs(0.5 * (lo + hi) - f) < 1e-9
+        assert hi - lo >= max(2 * s, MIN_BAND_FRACTION * 19.0) - 1e-12
