@@ -67,6 +67,14 @@ Index find(const modaluq::Diagram& d, Index order, double f) {
     return -1;
 }
 
+// A diagram whose poles are all stable: selection tests independent of the stability rules.
+modaluq::Diagram all_stable(const std::map<Index, std::vector<P>>& by_order) {
+    modaluq::Diagram d;
+    d.poles = make_poles(by_order);
+    d.status.assign(std::size_t(d.poles.size()), PoleStatus::stable);
+    return d;
+}
+
 }  // namespace
 
 TEST_CASE("stabilization: statuses and reasons follow the documented rules") {
@@ -240,10 +248,8 @@ TEST_CASE("selection: clusters, one pole per order, minimum size, representative
         if (n == 36) list[1].coupled = true;  // the 25 Hz pole
         by_order[n] = list;
     }
-    auto poles = make_poles(by_order);
-    modaluq::Diagram d;
-    d.poles = poles;
-    d.status.assign(std::size_t(poles.size()), PoleStatus::stable);
+    const modaluq::Diagram d = all_stable(by_order);
+    const modaluq::Poles& poles = d.poles;
     const auto s = modaluq::select_modes(d);
     // default minimum: a quarter of the 20 orders from the lowest clustered order, at least 3
     CHECK(s.min_cluster_size == 5);
@@ -299,10 +305,7 @@ TEST_CASE("selection: a cluster whose frequency is less certain than its peak's 
     // (sigma_f / (f xi) = 0.05) and a 0.5 %-damped column with sigma_f = 1 % of f (ratio 2).
     std::map<Index, std::vector<P>> by_order;
     for (Index n = 2; n <= 20; n += 2) by_order[n] = {{5.0, 0.02, 0}, {12.0, 0.005, 1, 0.12}};
-    const auto poles = make_poles(by_order);
-    modaluq::Diagram d;
-    d.poles = poles;
-    d.status.assign(std::size_t(poles.size()), PoleStatus::stable);
+    const modaluq::Diagram d = all_stable(by_order);
     auto s = modaluq::select_modes(d);
     REQUIRE(s.n_modes() == 1);
     CHECK(s.frequency_hz(0) == doctest::Approx(5.0));
@@ -331,10 +334,7 @@ TEST_CASE("selection: the per-cluster minimum size counts the orders from the cl
         by_order[n] = {{5.0, 0.02, 0}};
         if (n >= 30) by_order[n].push_back({12.0, 0.02, 1});
     }
-    const auto poles = make_poles(by_order);
-    modaluq::Diagram d;
-    d.poles = poles;
-    d.status.assign(std::size_t(poles.size()), PoleStatus::stable);
+    const modaluq::Diagram d = all_stable(by_order);
     modaluq::ClusteringOptions o;
     o.min_cluster_fraction = 0.5;  // global: 10 poles needed, the late mode has 6
     CHECK(modaluq::select_modes(d, o).n_modes() == 1);
@@ -346,10 +346,7 @@ TEST_CASE("selection: the per-cluster minimum size counts the orders from the cl
 
 TEST_CASE("selection: pieces of one mode are joined, two modes at the same orders are not") {
     auto select = [](const std::map<Index, std::vector<P>>& by_order, bool merge) {
-        const auto poles = make_poles(by_order);
-        modaluq::Diagram d;
-        d.poles = poles;
-        d.status.assign(std::size_t(poles.size()), PoleStatus::stable);
+        const modaluq::Diagram d = all_stable(by_order);
         modaluq::ClusteringOptions o;
         o.merge_fragments = merge;
         o.drop_doublets = false;  // tested below
@@ -383,10 +380,7 @@ TEST_CASE("selection: the later of two alike clusters a few per cent apart is dr
         if (n >= 10) by_order[n].push_back({10.2, 0.02, 1});
         if (n >= 20) by_order[n].push_back({10.3, 0.003, 3});
     }
-    const auto poles = make_poles(by_order);
-    modaluq::Diagram d;
-    d.poles = poles;
-    d.status.assign(std::size_t(poles.size()), PoleStatus::stable);
+    const modaluq::Diagram d = all_stable(by_order);
     modaluq::ClusteringOptions o;
     o.min_cluster_size = 5;
     const auto s = modaluq::select_modes(d, o);
