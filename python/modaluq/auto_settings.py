@@ -143,6 +143,20 @@ def choose_settings(n_samples: int, fs: float, n_outputs: int, *, frequency_rang
                           n_blocks=n_b, reasons=tuple(reasons))
 
 
+def capped_lag_warning(chosen: ChosenSettings, fs: float, n_outputs: int, frequency_range) -> str | None:
+    """A sentence when the automatic horizon, capped by the size of H or the record, cannot span one
+    period of the band's lowest frequency: what to change, with the numbers."""
+    f_low = lowest_frequency(fs, frequency_range)
+    if frequency_range is None or chosen.block_rows / fs * f_low >= 1.0:
+        return None
+    need = math.ceil(fs / f_low)
+    fewer = max(1, MAX_ROWS // need)
+    return (f"the automatic block_rows = {chosen.block_rows} (lags of {chosen.block_rows / fs:.3g} s) is less than one "
+            f"period of the band's lowest frequency {f_low:g} Hz: H is capped at {MAX_ROWS} rows and there are "
+            f"{n_outputs} outputs. Use at most {fewer} outputs (the others can still be identified in separate runs), "
+            f"raise the band's lower edge, or give block_rows >= {need} explicitly")
+
+
 def lag_warning(block_rows: int, fs: float, frequency_range) -> str | None:
     """A sentence when user-chosen lags cannot span one period of the band's lowest frequency."""
     if frequency_range is None or frequency_range[0] <= 0:

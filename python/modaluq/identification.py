@@ -19,7 +19,7 @@ from ._blas import single_threaded as single_threaded_blas
 # The argument checks live in _checks (every layer uses them); their names stay importable here.
 from ._checks import (MAX_COUNT, MAX_THREADS, _boolean, _integer, _integers, _real,  # noqa: F401
                       _sampling_frequency, as_samples)
-from .auto_settings import choose_settings, lag_warning
+from .auto_settings import capped_lag_warning, choose_settings, lag_warning
 from .preprocess import preprocess
 
 __all__ = ["Modes", "Result", "ModalUQWarning", "identify", "as_samples", "core_options"]
@@ -472,6 +472,10 @@ def identify(y, u=None, *, fs: float, block_rows: int | None = None, past_block_
         lag = lag_warning(o.block_rows, o.fs, band)
         if lag:
             extra.append(lag)
+    else:
+        capped = capped_lag_warning(chosen, o.fs, y.shape[1], band)
+        if capped:
+            extra.append(capped)
     result = _result_from_core(ident, settings, y.shape[1], 0 if u is None else u.shape[1], extra_warnings=extra,
                                output_names=names)
     _warn(result)

@@ -199,3 +199,13 @@ def test_cli_does_not_warn_about_lags_it_chose_itself(tmp_path, capsys):
     assert main(["identify", str(path), "--frequency-range", "0.2", "5", "--no-progress", "--block-rows", "10",
                  "--orders", "2:20:2"]) == 0
     assert "block_rows = 10 gives lags of" in capsys.readouterr().err
+
+
+def test_an_automatic_horizon_capped_below_one_period_is_a_warning_with_what_to_change():
+    """19 outputs at 100 Hz with a band from 1 Hz (Meloland's layout): H's 300-row cap leaves 15
+    block rows (0.15 s of lags); the warning says so and gives the numbers: at most 3 outputs for
+    the 100 rows a period of 1 Hz needs, or block_rows >= 100."""
+    rng = np.random.default_rng(3)
+    y = rng.standard_normal((8_000, 19))
+    with pytest.warns(modaluq.ModalUQWarning, match=r"automatic block_rows = 15 .* at most 3 outputs .* block_rows >= 100"):
+        modaluq.identify(y, fs=100.0, frequency_range=(1.0, 20.0), orders=range(2, 21, 2), uncertainty=False)
