@@ -491,8 +491,8 @@ def register(subparsers) -> argparse.ArgumentParser:
                         "frequency distance (default 0.05)")
     g.add_argument("--frequency-std-factor", type=float, default=2.0, metavar="K",
                    help="|df| <= K sqrt(std1^2 + std2^2) between orders (default 2; 0 switches it off)")
-    g.add_argument("--max-frequency-cov", type=float, default=0.02, metavar="FRAC",
-                   help="reject poles with std_f / f above this (default 0.02; 0 switches it off)")
+    g.add_argument("--max-frequency-cov", type=float, default=0.05, metavar="FRAC",
+                   help="reject poles with std_f / f above this (default 0.05; 0 switches it off)")
     g.add_argument("--max-damping-ratio", type=float, default=0.20, metavar="FRAC",
                    help="reject poles with a damping ratio above this (default 0.20)")
     g.add_argument("--distance-threshold", type=float, default=0.02,

@@ -48,8 +48,9 @@ struct StabilityCriteria {
     double min_mac = 0.98;                ///< smallest MAC between matched shapes
     /// k of |df| <= k sqrt(sf^2 + sf_prev^2); empty: no sigma test on the frequency
     std::optional<double> frequency_std_factor = 2.0;
-    /// largest sigma_f / f of a pole; empty: no such test (skipped without uncertainty)
-    std::optional<double> max_frequency_cov = 0.02;
+    /// largest sigma_f / f of a pole, a loose backstop (the selection judges a cluster's sigma
+    /// against its bandwidth f xi); empty: no such test (skipped without uncertainty)
+    std::optional<double> max_frequency_cov = 0.05;
     double min_damping_ratio = 0.0;       ///< poles below are rejected
     double max_damping_ratio = 0.20;      ///< poles above are rejected
     /// k of |dxi| <= k sqrt(sxi^2 + sxi_prev^2), replacing the relative damping test (a damping
