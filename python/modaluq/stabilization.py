@@ -279,7 +279,7 @@ class ClusteringSettings:
         order one mode is often fitted by a pair of poles with the same shape, the twin a few
         per cent away and often lightly damped; the twin appears at higher orders than the mode.
         "Later": the higher first order, then fewer poles. On the paper's chain, output-only,
-        this removes the twins selected in about a third of the records (docs/settings.md);
+        this removes the twins selected in 5 of 12 records (docs/settings.md);
         two physical modes that close and that alike in shape are not told apart by the
         sensors anyway. The dropped twin is listed with its reason.
     doublet_window, doublet_min_mac : float
