@@ -153,7 +153,7 @@ def capped_lag_warning(chosen: ChosenSettings, fs: float, n_outputs: int, freque
     fewer = max(1, MAX_ROWS // need)
     return (f"the automatic block_rows = {chosen.block_rows} (lags of {chosen.block_rows / fs:.3g} s) is less than one "
             f"period of the band's lowest frequency {f_low:g} Hz: H is capped at {MAX_ROWS} rows and there are "
-            f"{n_outputs} outputs. Use at most {fewer} outputs (the others can still be identified in separate runs), "
+            f"{n_outputs} outputs. Use at most {fewer} output{'' if fewer == 1 else 's'} (the others can still be identified in separate runs), "
             f"raise the band's lower edge, or give block_rows >= {need} explicitly")
 
 

@@ -793,13 +793,17 @@ class SelectedModes:
         s = f"{self.n_modes} modes (std: analytic, median over the cluster; spread: across the cluster)\n"
         s += self.table()
         if self.dropped_n_poles.size:
+            # counted by the reason each carries (selection.hpp words them)
             too_small = sum(1 for r in self.dropped_reason if "fewer than" in r)
-            too_uncertain = self.dropped_n_poles.size - too_small
+            too_uncertain = sum(1 for r in self.dropped_reason if "half-power bandwidth" in r)
+            twins = sum(1 for r in self.dropped_reason if r.startswith("a twin of"))
             parts = []
             if too_small:
                 parts.append(f"{too_small} with fewer than {self.min_cluster_size} poles")
             if too_uncertain:
                 parts.append(f"{too_uncertain} whose frequency std exceeds the peak's half-power bandwidth")
+            if twins:
+                parts.append(f"{twins} twin{'' if twins == 1 else 's'} of a selected mode")
             s += f"\n{self.dropped_n_poles.size} cluster(s) dropped: " + ", ".join(parts)
         return s
 

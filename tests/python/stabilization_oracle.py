@@ -326,7 +326,7 @@ def select_modes_reference(diagram: Diagram, settings: ClusteringSettings | None
                                         - 1e-9)))
             smallest = min(smallest, need)
         if members.size < need:
-            dropped.append((float(np.median(f[members])), members.size, f"{members.size} poles, fewer than {need}"))
+            dropped.append((float(np.median(f[members])), members.size, f"{members.size} pole{'' if members.size == 1 else 's'}, fewer than {need}"))
         elif check_bandwidth and not std_per_bandwidth(members) <= settings.max_frequency_std_per_bandwidth:
             q = std_per_bandwidth(members)
             dropped.append((float(np.median(f[members])), members.size,

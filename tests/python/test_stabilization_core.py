@@ -161,3 +161,4 @@ def test_core_joins_the_pieces_of_a_mode_as_the_reference_does():
     default = modaluq.select_modes(diagram, min_cluster_size=12)
     np.testing.assert_allclose(default.frequency_hz, [10.0, 20.0], atol=2e-3)
     assert any(r.startswith("a twin of the 20 Hz mode") for r in default.dropped_reason)
+    assert "1 cluster(s) dropped: 1 twin of a selected mode" in str(default)  # counted by its reason

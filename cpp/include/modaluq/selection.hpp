@@ -360,7 +360,8 @@ inline SelectedModes select_modes(const Diagram& diagram, const ClusteringOption
         const double q = check_bandwidth ? std_per_bandwidth(one_per_order) : 0.0;
         if (size < need)
             dropped.push_back({median_f(one_per_order), size,
-                               std::to_string(size) + " poles, fewer than " + std::to_string(need)});
+                               std::to_string(size) + (size == 1 ? " pole" : " poles") + ", fewer than " +
+                                   std::to_string(need)});
         else if (check_bandwidth && !(q <= *options.max_frequency_std_per_bandwidth))
             dropped.push_back({median_f(one_per_order), size,
                                "frequency std " + detail::format_number("%.3g", q) +
