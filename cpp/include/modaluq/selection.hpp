@@ -270,14 +270,21 @@ inline SelectedModes select_modes(const Diagram& diagram, const ClusteringOption
     for (Index i = 0; i < n; ++i)
         if (std::find(options.statuses.begin(), options.statuses.end(), diagram.status[i]) != options.statuses.end())
             idx.push_back(i);
+    // The minimum size (one rule, for all clusters or per cluster): a fraction of the orders from the first one that holds the cluster (or
+    // any clustered pole) upwards, at least 3.
+    auto orders_from = [&](Index first) {
+        return Index(std::count_if(P.orders.begin(), P.orders.end(), [&](Index o) { return o >= first; }));
+    };
+    auto min_size_from = [&](Index first) {
+        return std::max<Index>(3, Index(std::ceil(options.min_cluster_fraction * double(orders_from(first)) - 1e-9)));
+    };
     Index min_size = options.min_cluster_size;
     if (min_size == 0) {
         min_size = 3;
         if (!idx.empty()) {
             Index first = P.order(idx[0]);
             for (Index i : idx) first = std::min(first, P.order(i));
-            const auto n_after = std::count_if(P.orders.begin(), P.orders.end(), [&](Index o) { return o >= first; });
-            min_size = std::max<Index>(3, Index(std::ceil(options.min_cluster_fraction * double(n_after) - 1e-9)));
+            min_size = min_size_from(first);
         }
     }
 
@@ -305,14 +312,6 @@ inline SelectedModes select_modes(const Diagram& diagram, const ClusteringOption
         std::vector<double> v;
         for (Index i : members) v.push_back(f(i));
         return detail::median(v);
-    };
-    // The minimum size: a fraction of the orders from the first one that holds the cluster (or
-    // any clustered pole) upwards, at least 3.
-    auto orders_from = [&](Index first) {
-        return Index(std::count_if(P.orders.begin(), P.orders.end(), [&](Index o) { return o >= first; }));
-    };
-    auto min_size_from = [&](Index first) {
-        return std::max<Index>(3, Index(std::ceil(options.min_cluster_fraction * double(orders_from(first)) - 1e-9)));
     };
     // Median sigma_f / (f xi) over a cluster: how well the frequency is known against the peak's width.
     auto std_per_bandwidth = [&](const std::vector<Index>& members) {
