@@ -4,7 +4,8 @@
 #   2. the C++ core's tests (ctest), built with assertions on and AddressSanitizer +
 #      UndefinedBehaviorSanitizer, so a read out of bounds or an overflow fails the run;
 #   3. a C++ project built against the installed headers (cpp/examples);
-#   4. pytest (oracle cross-validation, Monte Carlo, loaders, CLI, ...);
+#   4. ruff, then pytest (oracle cross-validation, Monte Carlo, loaders, CLI, the layers of the
+#      package, the docstring examples; every warning is an error unless a test expects it);
 #   5. a short fuzz run over the file loaders (tests/fuzz; FUZZ_SECONDS per format, default 10;
 #      failing inputs are saved in build/fuzz-failures).
 # Idempotent. JOBS sets the build parallelism (default 2).
@@ -28,8 +29,9 @@ cmake -S cpp/examples -B build/example -DCMAKE_PREFIX_PATH="$PWD/build/prefix" >
 cmake --build build/example -j"$JOBS"
 build/example/identify_stream
 
-echo "== Python: pytest"
-"$PY" -m pytest -q
+echo "== Python: ruff (lint) and pytest (tests and the package's docstring examples, warnings as errors)"
+"$PY" -m ruff check python tests bench
+"$PY" -m pytest -q --doctest-modules --pyargs modaluq tests/python
 
 echo "== loaders: short fuzz run (the long run: docs/reliability.md)"
 "$PY" tests/fuzz/fuzz_loaders.py --seconds "${FUZZ_SECONDS:-10}" --seed "${FUZZ_SEED:-0}" --save-dir build/fuzz-failures

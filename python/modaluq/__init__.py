@@ -8,25 +8,28 @@ mode shape at every model order, computed from one dataset.
 >>> sim = modaluq.simulate(20_000, seed=1)
 >>> result = modaluq.identify(sim.y, sim.u, fs=sim.fs, block_rows=15, orders=range(2, 31, 2))
 >>> print(result.at_order(12))                                        # doctest: +SKIP
+
+The modules form layers, each importing only those below it (docs/architecture.md):
+``checks`` → ``settings``, ``preprocess``, ``auto_settings``, ``spectrum``, ``harmonics`` →
+``results`` → ``identification``, ``streaming`` → ``stabilization`` → ``selection`` →
+``horizons``, ``analysis`` → ``plot``, ``export`` → ``cli``; ``io`` and ``simulate`` are side
+leaves, ``validation`` sits on identification and the simulator.
 """
 
 from ._core import NumericalError
-from ._core import __version__ as _core_version
-from .identification import ModalUQWarning, Modes, Result, identify
-from .simulate import Simulation, simulate
-from .stabilization import (ClusteringSettings, Diagram, PoleStatus, SelectedModes, StabilityCriteria,
-                            select_modes, stabilization_diagram)
-from .streaming import CovarianceAccumulator
+from .analysis import Analysis
 from .horizons import HorizonCheck, check_horizons
-
-try:
-    from importlib.metadata import PackageNotFoundError, version as _dist_version
-
-    __version__ = _dist_version("modaluq")
-except PackageNotFoundError:  # pragma: no cover - running from a source tree
-    __version__ = _core_version
+from .identification import identify
+from .results import ModalUQWarning, Modes, Result
+from .selection import SelectedModes, select_modes
+from .settings import ClusteringSettings, PoleStatus, Settings, StabilityCriteria
+from .simulate import Simulation, simulate
+from .stabilization import Diagram, modal_assurance_criterion, stabilization_diagram
+from .streaming import CovarianceAccumulator
+from .version import __version__
 
 __all__ = [
+    "Analysis",
     "ClusteringSettings",
     "CovarianceAccumulator",
     "Diagram",
@@ -37,10 +40,12 @@ __all__ = [
     "PoleStatus",
     "Result",
     "SelectedModes",
+    "Settings",
     "Simulation",
     "StabilityCriteria",
     "check_horizons",
     "identify",
+    "modal_assurance_criterion",
     "select_modes",
     "simulate",
     "stabilization_diagram",

@@ -30,7 +30,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from ._checks import _integer, _real, _sampling_frequency
+from .checks import check_integer, check_real, check_sampling_frequency
 
 __all__ = ["ChosenSettings", "choose_settings", "LAG_PERIODS", "CENTRE_PERIODS", "MAX_ROWS", "MAX_ORDER", "MIN_ORDER",
            "XI_REF", "MIN_BLOCKS", "MAX_BLOCKS"]
@@ -90,10 +90,10 @@ def choose_settings(n_samples: int, fs: float, n_outputs: int, *, frequency_rang
     >>> s.block_rows, s.orders[-1], s.n_blocks
     (62, 100, 50)
     """
-    n_samples = _integer("n_samples", n_samples, minimum=1)
-    fs = _sampling_frequency(fs)
-    l = _integer("n_outputs", n_outputs, minimum=1)
-    r = l if n_references is None else _integer("n_references", n_references, minimum=1)
+    n_samples = check_integer("n_samples", n_samples, minimum=1)
+    fs = check_sampling_frequency(fs)
+    l = check_integer("n_outputs", n_outputs, minimum=1)
+    r = l if n_references is None else check_integer("n_references", n_references, minimum=1)
     f_low = lowest_frequency(fs, frequency_range)
     reasons = []
     nb_min = max(MIN_BLOCKS, 2 * l + 3)
@@ -119,7 +119,7 @@ def choose_settings(n_samples: int, fs: float, n_outputs: int, *, frequency_rang
             why += f", the fewest for order {MIN_ORDER} with {l} outputs"
         reasons.append(why)
     else:
-        p = _integer("block_rows", block_rows, minimum=2)
+        p = check_integer("block_rows", block_rows, minimum=2)
     limit = min((p - 1) * l, p * r)
     if orders is None:
         n_max = max(2, min(limit, MAX_ORDER) // 2 * 2)
@@ -138,7 +138,7 @@ def choose_settings(n_samples: int, fs: float, n_outputs: int, *, frequency_rang
                     f"so the standard deviations of the slowest modes are less reliable")
         reasons.append(why)
     else:
-        n_b = _integer("n_blocks", n_blocks, minimum=2)
+        n_b = check_integer("n_blocks", n_blocks, minimum=2)
     return ChosenSettings(block_rows=p, orders=tuple(orders) if not isinstance(orders, int) else (orders,),
                           n_blocks=n_b, reasons=tuple(reasons))
 
@@ -153,7 +153,8 @@ def capped_lag_warning(chosen: ChosenSettings, fs: float, n_outputs: int, freque
     fewer = max(1, MAX_ROWS // need)
     return (f"the automatic block_rows = {chosen.block_rows} (lags of {chosen.block_rows / fs:.3g} s) is less than one "
             f"period of the band's lowest frequency {f_low:g} Hz: H is capped at {MAX_ROWS} rows and there are "
-            f"{n_outputs} outputs. Use at most {fewer} output{'' if fewer == 1 else 's'} (the others can still be identified in separate runs), "
+            f"{n_outputs} outputs. Use at most {fewer} output{'' if fewer == 1 else 's'} "
+            "(the others can still be identified in separate runs), "
             f"raise the band's lower edge, or give block_rows >= {need} explicitly")
 
 
@@ -161,7 +162,7 @@ def lag_warning(block_rows: int, fs: float, frequency_range) -> str | None:
     """A sentence when user-chosen lags cannot span one period of the band's lowest frequency."""
     if frequency_range is None or frequency_range[0] <= 0:
         return None
-    f_low = _real("frequency_range[0]", frequency_range[0], low=0, low_open=True)
+    f_low = check_real("frequency_range[0]", frequency_range[0], low=0, low_open=True)
     if block_rows / fs * f_low >= 1.0:
         return None
     need = math.ceil(LAG_PERIODS * fs / f_low)

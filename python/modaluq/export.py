@@ -9,6 +9,9 @@
   stabilization diagram, every pole with status, reason and σ, plus the selected modes, with
   the stamp as global attributes.
 
+Every conversion of a result to a file format lives here (``Diagram.to_xarray`` and
+``SelectedModes.to_dict`` call it).
+
 >>> from modaluq import export                                          # doctest: +SKIP
 >>> stamp = export.provenance("run1.csv", settings={"identification": result.settings})  # doctest: +SKIP
 >>> export.write("modes.json", diagram, selected, stamp=stamp)          # doctest: +SKIP
@@ -16,111 +19,128 @@
 
 from __future__ import annotations
 
-import datetime
-import hashlib
-import importlib
 import json
+import math
 import os
-import platform
 from pathlib import Path
 
 import numpy as np
 
-__all__ = ["EXTENSIONS", "file_sha256", "provenance", "report", "require", "write", "write_csv", "write_json",
-           "write_netcdf"]
+from .checks import require
+from .provenance import file_sha256, jsonable, provenance
+from .settings import PoleStatus
+
+__all__ = ["EXTENSIONS", "diagram_to_xarray", "file_sha256", "provenance", "report", "selected_modes_to_dict",
+           "write", "write_csv", "write_json", "write_netcdf"]
 
 #: file extension -> what :func:`write` writes
 EXTENSIONS = {".json": "json", ".csv": "csv", ".nc": "netcdf", ".nc4": "netcdf"}
 
-#: optional dependency -> the extra of modaluq that installs it
-EXTRAS = {"xarray": "export", "netCDF4": "export"}
 
-
-def require(module: str, purpose: str = "this"):
-    """Import an optional dependency, or raise an ImportError that says which extra installs it.
-
-    modaluq is installed from its source tree (it is not on the package index), hence the
-    ``pip install ".[extra]"`` in the message.
-    """
-    try:
-        return importlib.import_module(module)
-    except ImportError as exc:
-        extra = EXTRAS.get(module, "all")
-        raise ImportError(f"{purpose} needs {module}, which is not installed: run pip install \".[{extra}]\" "
-                          f"in the modaluq source directory (or pip install {module})") from exc
-
-
-def file_sha256(path, chunk_bytes: int = 1 << 20) -> str:
-    """SHA-256 checksum (hex) of a file's bytes, read in chunks of ``chunk_bytes``."""
-    h = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for block in iter(lambda: fh.read(chunk_bytes), b""):
-            h.update(block)
-    return h.hexdigest()
-
-
-def _jsonable(x):
-    """Convert NumPy scalars/arrays, enums, paths and non-finite floats into JSON values."""
-    if isinstance(x, dict):
-        return {str(k): _jsonable(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_jsonable(v) for v in x]
-    if isinstance(x, np.ndarray):
-        return _jsonable(x.tolist())
-    if isinstance(x, (np.bool_, bool)):
-        return bool(x)
-    if isinstance(x, (np.integer, int)):
-        return int(x)
-    if isinstance(x, (np.floating, float)):
+def selected_modes_to_dict(selected) -> dict:
+    """:class:`~modaluq.SelectedModes` as plain Python (JSON-ready): one dict per mode, shapes per channel."""
+    def num(x):
         x = float(x)
-        return x if np.isfinite(x) else None
-    if isinstance(x, os.PathLike):
-        return os.fspath(x)
-    if x is None or isinstance(x, str):
-        return x
-    if hasattr(x, "value"):  # enum
-        return _jsonable(x.value)
-    return str(x)
+        return x if math.isfinite(x) else None
 
-
-def provenance(source=None, *, settings: dict | None = None) -> dict:
-    """A provenance stamp: modaluq version, UTC timestamp, settings and the input's checksum.
-
-    Parameters
-    ----------
-    source : str or os.PathLike, optional
-        The input data file; its absolute path, size in bytes and SHA-256 are recorded.
-    settings : dict, optional
-        Every setting of the analysis (identification, stability criteria, clustering...).
-
-    Returns
-    -------
-    dict
-        JSON-ready.
-    """
-    from . import __version__
-
-    stamp = {
-        "modaluq_version": __version__,
-        "created_utc": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
-        "python_version": platform.python_version(),
-        "numpy_version": np.__version__,
+    modes = []
+    for i in range(selected.n_modes):
+        shape = {}
+        for k, name in enumerate(selected.output_names):
+            shape[name] = {
+                "real": num(selected.mode_shape[k, i].real), "imag": num(selected.mode_shape[k, i].imag),
+                "std_real": num(selected.mode_shape_std_real[k, i]),
+                "std_imag": num(selected.mode_shape_std_imag[k, i]),
+                "spread_real": num(selected.mode_shape_spread_real[k, i]),
+                "spread_imag": num(selected.mode_shape_spread_imag[k, i]),
+            }
+        modes.append({
+            "mode": i + 1,
+            "frequency_hz": num(selected.frequency_hz[i]), "frequency_std": num(selected.frequency_std[i]),
+            "frequency_spread": num(selected.frequency_spread[i]),
+            "damping_ratio": num(selected.damping_ratio[i]), "damping_std": num(selected.damping_std[i]),
+            "damping_spread": num(selected.damping_spread[i]),
+            "representative_order": int(selected.representative_order[i]),
+            "n_poles": int(selected.n_poles[i]), "order_min": int(selected.order_min[i]),
+            "order_max": int(selected.order_max[i]), "min_mac": num(selected.min_mac[i]),
+            "mode_shape": shape,
+        })
+    return {
+        "modes": modes,
+        "dropped_clusters": [{"frequency_hz": num(f), "n_poles": int(n), "reason": str(r)}
+                             for f, n, r in zip(selected.dropped_frequency_hz, selected.dropped_n_poles,
+                                                selected.dropped_reason)],
+        "min_cluster_size": int(selected.min_cluster_size),
+        "clustering": selected.settings.to_dict(),
     }
-    if source is not None:
-        p = Path(source)
-        stamp["input_file"] = {"path": str(p.resolve()), "size_bytes": p.stat().st_size,
-                               "sha256": file_sha256(p)}
-    stamp["settings"] = _jsonable(settings or {})
-    return stamp
+
+
+def diagram_to_xarray(diagram, selected=None, attrs: dict | None = None):
+    """A :class:`~modaluq.Diagram` (and optionally the selected modes) as an :class:`xarray.Dataset`.
+
+    Dimensions ``pole`` and ``channel`` (and ``mode`` with ``selected``, whose variables are
+    prefixed ``selected_``); mode shapes are split into ``*_real`` / ``*_imag`` variables so
+    that the dataset writes to NetCDF-4.
+    ``attrs`` (e.g. a provenance stamp) become global attributes; nested values are stored
+    as JSON strings.
+    """
+    xr = require("xarray", "Diagram.to_xarray")
+
+    pole_vars = {
+        "order": (("pole",), diagram.order, {"long_name": "model order"}),
+        "frequency_hz": (("pole",), diagram.frequency_hz, {"units": "Hz"}),
+        "damping_ratio": (("pole",), diagram.damping_ratio, {"units": "1", "long_name": "damping ratio (fraction)"}),
+        "frequency_std": (("pole",), diagram.frequency_std, {"units": "Hz"}),
+        "damping_std": (("pole",), diagram.damping_std, {"units": "1"}),
+        "status": (("pole",), np.array([s.value for s in diagram.status], dtype=object), {}),
+        "reason": (("pole",), np.asarray(diagram.reason, dtype=object), {}),
+        "matched_pole": (("pole",), diagram.matched_pole,
+                         {"long_name": "index of the matched pole at the previous order (-1: none)"}),
+        "frequency_change": (("pole",), diagram.frequency_change, {"units": "1"}),
+        "damping_change": (("pole",), diagram.damping_change, {"units": "1"}),
+        "mac": (("pole",), diagram.mac, {"units": "1"}),
+        "frequency_change_std": (("pole",), diagram.frequency_change_std, {"units": "1"}),
+        "close_singular_values": (("pole",), diagram.close_singular_values.astype(np.int8), {}),
+        "noise_coupled": (("pole",), diagram.noise_coupled.astype(np.int8),
+                          {"long_name": "sigma not first-order meaningful: pole coupled to noise directions"}),
+        "mode_shape_real": (("channel", "pole"), diagram.mode_shape.real, {}),
+        "mode_shape_imag": (("channel", "pole"), diagram.mode_shape.imag, {}),
+        "mode_shape_std_real": (("channel", "pole"), diagram.mode_shape_std_real, {}),
+        "mode_shape_std_imag": (("channel", "pole"), diagram.mode_shape_std_imag, {}),
+    }
+    coords = {"pole": np.arange(diagram.n_poles), "channel": list(diagram.output_names)}
+    if selected is not None:
+        sel = selected
+        pole_vars["mode_of_pole"] = (("pole",), sel.mode_of_pole + 1,
+                                     {"long_name": "selected mode number of each pole (as the mode "
+                                                   "coordinate, from 1; 0: none)"})
+        for name in ("frequency_hz", "damping_ratio", "frequency_std", "damping_std",
+                     "frequency_spread", "damping_spread", "representative_order",
+                     "representative_pole", "n_poles", "order_min", "order_max", "min_mac"):
+            pole_vars[f"selected_{name}"] = (("mode",), getattr(sel, name), {})
+        for name, values in (("mode_shape_real", sel.mode_shape.real), ("mode_shape_imag", sel.mode_shape.imag),
+                             ("mode_shape_std_real", sel.mode_shape_std_real),
+                             ("mode_shape_std_imag", sel.mode_shape_std_imag),
+                             ("mode_shape_spread_real", sel.mode_shape_spread_real),
+                             ("mode_shape_spread_imag", sel.mode_shape_spread_imag)):
+            pole_vars[f"selected_{name}"] = (("channel", "mode"), values, {})
+        coords["mode"] = np.arange(1, sel.n_modes + 1)  # numbered from 1, as in every table and plot
+    ds = xr.Dataset({k: xr.Variable(d, v, a) for k, (d, v, a) in pole_vars.items()}, coords=coords)
+    gattrs = {"fs_hz": diagram.fs, "criteria": json.dumps(diagram.criteria.to_dict()),
+              "identification_settings": json.dumps(diagram.result_settings, default=str)}
+    if selected is not None:
+        gattrs["clustering"] = json.dumps(selected.settings.to_dict())
+    for k, v in (attrs or {}).items():
+        gattrs[k] = v if isinstance(v, (str, int, float)) else json.dumps(v, default=str)
+    ds.attrs.update(gattrs)
+    return ds
 
 
 def report(diagram, selected, *, stamp: dict | None = None, extra: dict | None = None) -> dict:
     """The JSON report as a dict: stamp, diagram summary, selected modes (see :func:`write_json`)."""
-    from .stabilization import PoleStatus
-
     out = {"stamp": stamp if stamp is not None else provenance()}
     if extra:
-        out.update(_jsonable(extra))
+        out.update(jsonable(extra))
     if diagram is not None:
         out["diagram"] = {
             "orders": list(diagram.orders),
@@ -135,11 +155,12 @@ def report(diagram, selected, *, stamp: dict | None = None, extra: dict | None =
     sel = selected.to_dict()
     out["clustering"] = {k: sel[k] for k in ("clustering", "min_cluster_size", "dropped_clusters")}
     out["units"] = {"frequency_hz": "Hz", "damping_ratio": "fraction (0.02 = 2 %)",
-                    "std": "analytic (delta-method) standard deviation, median over the poles of the mode's cluster that are not noise-coupled and not at a close cut",
+                    "std": "analytic (delta-method) standard deviation, median over the poles of the mode's cluster "
+                           "that are not noise-coupled and not at a close cut",
                     "spread": "sample standard deviation across the poles of the mode's cluster",
                     "mode_shape": "normalised: largest-modulus component = 1"}
     out["modes"] = sel["modes"]
-    return _jsonable(out)
+    return jsonable(out)
 
 
 def write_json(path, diagram, selected, *, stamp: dict | None = None, extra: dict | None = None) -> Path:
@@ -161,7 +182,7 @@ def write_netcdf(path, diagram, selected=None, *, stamp: dict | None = None) -> 
     """Write the full diagram (every pole, status, reason, σ) and the selected modes to NetCDF-4."""
     require("netCDF4", "writing NetCDF")  # xarray's own message would name an "engine", not the package
     path = Path(path)
-    ds = diagram.to_xarray(selected, attrs={"stamp": json.dumps(_jsonable(stamp or provenance()))})
+    ds = diagram.to_xarray(selected, attrs={"stamp": json.dumps(jsonable(stamp or provenance()))})
     ds.to_netcdf(path, engine="netcdf4")
     return path
 

@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._checks import _real, _sampling_frequency, as_samples
+from .checks import as_samples, check_real, check_sampling_frequency
 
 __all__ = ["FAMILY_TOLERANCE", "HARMONIC_KURTOSIS", "LIGHT_DAMPING", "LIGHT_DAMPING_KURTOSIS", "harmonic_kurtosis",
            "possible_harmonics"]
@@ -62,9 +62,9 @@ def harmonic_kurtosis(y, fs: float, frequencies_hz, *, relative_bandwidth: float
     from scipy.signal import butter, sosfiltfilt
     from scipy.stats import kurtosis
 
-    fs = _sampling_frequency(fs)
+    fs = check_sampling_frequency(fs)
     y = as_samples(y, "y")
-    bw = _real("relative_bandwidth", relative_bandwidth, low=0, low_open=True, high=0.5)
+    bw = check_real("relative_bandwidth", relative_bandwidth, low=0, low_open=True, high=0.5)
     out = []
     for f in np.atleast_1d(np.asarray(frequencies_hz, dtype=float)):
         lo, hi = f * (1 - bw), f * (1 + bw)
@@ -97,7 +97,7 @@ def possible_harmonics(y, fs: float, frequencies_hz, damping_ratio=None, *, thre
     >>> possible_harmonics(y, 50.0, [7.0, 12.0]).tolist()
     [True, False]
     """
-    threshold = _real("threshold", threshold, low=1, high=3)
+    threshold = check_real("threshold", threshold, low=1, high=3)
     k = harmonic_kurtosis(y, fs, frequencies_hz, relative_bandwidth=relative_bandwidth)
     flag = np.isfinite(k) & (k < threshold)
     if damping_ratio is not None:

@@ -7,9 +7,11 @@ with the chosen ``block_rows`` and with shorter and longer ones, matches every s
 across the runs (nearest frequency within ``match_window``, shapes with MAC >= ``min_mac``) and
 reports, beside each mode's σ, the spread of its estimates across the horizons.
 
->>> import modaluq
+>>> import warnings, modaluq
 >>> sim = modaluq.simulate(40_000, seed=4)
->>> check = modaluq.check_horizons(sim.y, sim.u, fs=sim.fs, frequency_range=(1, 20))
+>>> with warnings.catch_warnings():  # the slow spurious poles of the high orders are warned about
+...     warnings.simplefilter("ignore", modaluq.ModalUQWarning)
+...     check = modaluq.check_horizons(sim.y, sim.u, fs=sim.fs, frequency_range=(1, 20))
 >>> check.block_rows
 (75, 100, 150)
 >>> int(check.found.sum(axis=1).min())  # every mode found at every horizon
@@ -18,15 +20,17 @@ reports, beside each mode's σ, the spread of its estimates across the horizons.
 
 from __future__ import annotations
 
-import math
 import warnings
 from dataclasses import dataclass
 
 import numpy as np
 
-from ._checks import _real
-from .identification import ModalUQWarning, identify
-from .stabilization import SelectedModes, modal_assurance_criterion
+from .checks import check_real
+from .identification import identify, make_settings
+from .results import ModalUQWarning
+from .selection import SelectedModes, select_modes
+from .settings import Settings
+from .stabilization import modal_assurance_criterion, stabilization_diagram
 
 __all__ = ["HorizonCheck", "check_horizons"]
 
@@ -102,25 +106,24 @@ def _spread(values: np.ndarray) -> np.ndarray:
     return out
 
 
-def check_horizons(y, u=None, *, fs: float, frequency_range=None, block_rows: int | None = None,
-                   factors=(0.75, 1.0, 1.5), match_window: float = 0.05, min_mac: float = 0.8,
-                   criteria=None, settings=None, progress=None, **identify_kwargs) -> HorizonCheck:
+def check_horizons(y, u=None, *, fs: float, settings: Settings | None = None, factors=(0.75, 1.0, 1.5),
+                   match_window: float = 0.05, min_mac: float = 0.8, criteria=None, clustering=None, progress=None,
+                   **keywords) -> HorizonCheck:
     """Identify and select the record at ``block_rows`` times each factor, and match the modes.
 
     Parameters
     ----------
-    y, u, fs, frequency_range, **identify_kwargs
+    y, u, fs, settings, **keywords
         As :func:`modaluq.identify` (``orders`` and ``n_blocks`` are chosen per horizon unless
-        given).
-    block_rows : int, optional
-        The reference horizon (default: the automatic choice for the band, docs/settings.md).
+        given). ``block_rows`` is the reference horizon (default: the automatic choice for the
+        band, docs/settings.md).
     factors : sequence of float
         Multiples of the reference horizon to try (default 0.75, 1, 1.5); 1 is added if absent.
     match_window : float
         Largest relative frequency difference for a mode to be found again (fraction).
     min_mac : float
         Smallest MAC between the shapes of the mode and its match.
-    criteria, settings
+    criteria, clustering
         :class:`~modaluq.StabilityCriteria` and :class:`~modaluq.ClusteringSettings` (defaults).
     progress : callable, optional
         Called with a sentence before each identification.
@@ -129,12 +132,13 @@ def check_horizons(y, u=None, *, fs: float, frequency_range=None, block_rows: in
     -------
     HorizonCheck
     """
-    factors = tuple(_real("factors", f, low=0, low_open=True) for f in np.atleast_1d(factors))
+    factors = tuple(check_real("factors", f, low=0, low_open=True) for f in np.atleast_1d(factors))
     if 1.0 not in factors:
         factors = factors + (1.0,)
-    _real("match_window", match_window, low=0, low_open=True)
-    _real("min_mac", min_mac, low=0, high=1)
-    ref = identify(y, u, fs=fs, frequency_range=frequency_range, block_rows=block_rows, **identify_kwargs)
+    check_real("match_window", match_window, low=0, low_open=True)
+    check_real("min_mac", min_mac, low=0, high=1)
+    s = make_settings(settings, keywords, function="check_horizons")
+    ref = identify(y, u, fs=fs, settings=s)
     p_ref = int(ref.settings["block_rows"])
     horizons = sorted({max(2, int(round(p_ref * f))) for f in factors})
     selections = {}
@@ -146,8 +150,8 @@ def check_horizons(y, u=None, *, fs: float, frequency_range=None, block_rows: in
         else:
             with warnings.catch_warnings():  # the reference run's warnings are the ones that matter
                 warnings.simplefilter("ignore", ModalUQWarning)
-                r = identify(y, u, fs=fs, frequency_range=frequency_range, block_rows=p, **identify_kwargs)
-        selections[p] = r.stabilization_diagram(criteria).select_modes(settings)
+                r = identify(y, u, fs=fs, settings=s.replace(block_rows=p))
+        selections[p] = select_modes(stabilization_diagram(r, criteria), clustering)
     base = selections[p_ref]
     n = base.n_modes
     f = np.full((n, len(horizons)), np.nan)

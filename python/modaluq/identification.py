@@ -1,355 +1,40 @@
-"""Identification: ``modaluq.identify`` and the result objects it returns.
+"""Identification: :func:`identify` runs covariance-driven SSI with the uncertainty of every mode.
 
 The arithmetic runs once, in the C++ core (``modaluq._core``); this module converts the
 user's arrays (``(n_samples, n_channels)``, the shape CSV files, pandas and the OMA packages
-use), names the argument at fault when something is wrong, and wraps the core's result in
-plain frozen dataclasses that print, convert to pandas and plot.
+use), preprocesses them when asked, completes the settings from the data, and wraps the
+core's result in a :class:`~modaluq.Result`.
 """
 
 from __future__ import annotations
 
-import warnings
-from dataclasses import dataclass, field
 from typing import Sequence
 
 import numpy as np
 
 from . import _core
 from ._blas import single_threaded as single_threaded_blas
-# The argument checks live in _checks (every layer uses them); their names stay importable here.
-from ._checks import (MAX_COUNT, MAX_THREADS, _boolean, _integer, _integers, _real,  # noqa: F401
-                      _sampling_frequency, as_samples)
 from .auto_settings import capped_lag_warning, choose_settings, lag_warning
+from .checks import as_samples, check_sampling_frequency
 from .preprocess import preprocess
+from .results import Result, result_from_core, warn_all
+from .settings import Settings
 
-__all__ = ["Modes", "Result", "ModalUQWarning", "identify", "as_samples", "core_options"]
-
-
-class ModalUQWarning(UserWarning):
-    """A result is computed but a quality flag is set (see ``Result.warnings``)."""
+__all__ = ["identify", "make_settings"]
 
 
-def core_options(*, fs, block_rows, past_block_rows=None, orders, n_blocks=50, references=None,
-                 uncertainty=True, demean=True, input_rcond=1e-10, threads=1, freeze_noise=True,
-                 noise_coupling_limit=20.0) -> "_core.IdentifyOptions":
-    """Check the settings of :func:`identify` and return them as the core's options struct."""
-    o = _core.IdentifyOptions()
-    o.fs = _sampling_frequency(fs)
-    o.block_rows = _integer("block_rows", block_rows, minimum=2)
-    o.past_block_rows = 0 if past_block_rows is None else _integer("past_block_rows", past_block_rows, minimum=1)
-    o.orders = sorted(set(_integers("orders", orders, minimum=1)))
-    o.n_blocks = _integer("n_blocks", n_blocks)
-    o.references = [] if references is None else _integers("references", references, minimum=0)
-    o.uncertainty = _boolean("uncertainty", uncertainty)
-    o.demean = _boolean("demean", demean)
-    o.input_rcond = _real("input_rcond", input_rcond, low=0, high=1, high_open=True)
-    o.threads = _integer("threads", threads, minimum=1, maximum=MAX_THREADS)
-    o.freeze_noise = _boolean("freeze_noise", freeze_noise)
-    o.noise_coupling_limit = _real("noise_coupling_limit", noise_coupling_limit, low=1)
-    o.validate()
-    return o
+def make_settings(settings: Settings | None, keywords: dict, *, function: str = "identify") -> Settings:
+    """``settings`` with ``keywords`` replacing its fields (a new :class:`Settings` without it)."""
+    if settings is not None and not isinstance(settings, Settings):
+        raise TypeError(f"settings must be a modaluq.Settings; got {type(settings).__name__}")
+    unknown = sorted(set(keywords) - set(Settings.__dataclass_fields__))
+    if unknown:
+        raise TypeError(f"{function}() got an unexpected keyword argument {unknown[0]!r}")
+    return Settings(**keywords) if settings is None else settings.replace(**keywords)
 
 
-# --------------------------------------------------------------------------- results
-
-
-@dataclass(frozen=True, repr=False)
-class Modes:
-    """The modes identified at one model order, sorted by frequency.
-
-    One mode per complex-conjugate pair of eigenvalues. Frequencies in Hz, damping ratios as
-    fractions (0.02 = 2 %), mode shapes normalised so that their largest-modulus component is
-    exactly 1. The ``*_std`` fields and ``covariance`` are first-order (delta-method) standard
-    deviations and covariances from the block sample covariance of the data covariances; they
-    are ``None`` when the identification ran with ``uncertainty=False``.
-    """
-
-    order: int                                   #: model order n
-    frequency_hz: np.ndarray                     #: (n_modes,) natural frequencies, Hz
-    damping_ratio: np.ndarray                    #: (n_modes,) damping ratios, fraction
-    mode_shape: np.ndarray                       #: (n_outputs, n_modes) complex
-    eigenvalue: np.ndarray                       #: (n_modes,) discrete-time eigenvalues of A
-    reference_component: np.ndarray              #: (n_modes,) component of each shape scaled to 1
-    frequency_std: np.ndarray | None = None      #: (n_modes,) Hz
-    damping_std: np.ndarray | None = None        #: (n_modes,) fraction
-    mode_shape_std_real: np.ndarray | None = None  #: (n_outputs, n_modes)
-    mode_shape_std_imag: np.ndarray | None = None  #: (n_outputs, n_modes)
-    covariance: np.ndarray | None = None         #: (n_modes, 2+2l, 2+2l) of [f, xi, Re shape, Im shape]
-    block_too_short: np.ndarray | None = None    #: (n_modes,) blocks shorter than half the decay time
-    singular_value_gap: float = float("nan")     #: (s_n - s_{n+1}) / its std
-    close_singular_values: bool = False          #: the order cuts significant singular values within 3 std
-    noise_coupling: np.ndarray | None = None     #: (n_modes,) sigma unfrozen / frozen (uq-math §5.5), 1 up to k*
-    noise_coupled: np.ndarray | None = None      #: (n_modes,) no first-order sigma: unfrozen (large) sigma kept
-    degenerate: bool = False                     #: no modes: above the numerical rank of H, or A not decomposable
-    note: str = ""                               #: why the order is degenerate
-
-    @classmethod
-    def _from_core(cls, m) -> "Modes":
-        # A run with uncertainty fills the std arrays of every order; a degenerate order has no
-        # gap statistic, but its (empty) covariance has the (2+2l)^2 rows of a run with uncertainty.
-        has_std = m.frequency_std.size == m.frequency_hz.size and (
-            not np.isnan(m.singular_value_gap) or m.covariance.shape[0] > 0)
-        l = m.mode_shape.shape[0]
-        npar = 2 + 2 * l
-        cov = None
-        if has_std:
-            # Column i of the core's (npar^2 x n_modes) matrix is mode i's symmetric covariance.
-            cov = np.ascontiguousarray(m.covariance.T).reshape(-1, npar, npar)
-        return cls(
-            order=int(m.order),
-            frequency_hz=m.frequency_hz,
-            damping_ratio=m.damping_ratio,
-            mode_shape=m.mode_shape,
-            eigenvalue=m.eigenvalue,
-            reference_component=m.reference_component,
-            frequency_std=m.frequency_std if has_std else None,
-            damping_std=m.damping_std if has_std else None,
-            mode_shape_std_real=m.mode_shape_std_real if has_std else None,
-            mode_shape_std_imag=m.mode_shape_std_imag if has_std else None,
-            covariance=cov,
-            block_too_short=m.block_too_short if has_std else None,
-            singular_value_gap=float(m.singular_value_gap),
-            close_singular_values=bool(m.close_singular_values),
-            noise_coupling=m.noise_coupling if has_std else None,
-            noise_coupled=m.noise_coupled if has_std else None,
-            degenerate=bool(m.degenerate),
-            note=str(m.note),
-        )
-
-    @property
-    def n_modes(self) -> int:
-        return int(self.frequency_hz.size)
-
-    @property
-    def has_uncertainty(self) -> bool:
-        return self.frequency_std is not None
-
-    def __len__(self) -> int:
-        return self.n_modes
-
-    def to_dataframe(self, output_names=None):
-        """One row per mode (numbered from 1): frequency, damping and (when computed) their
-        standard deviations, and the shape in columns ``mode_shape_<channel>``."""
-        import pandas as pd
-
-        data = {
-            "order": np.full(self.n_modes, self.order),
-            "frequency_hz": self.frequency_hz,
-            "damping_ratio": self.damping_ratio,
-        }
-        if self.has_uncertainty:
-            data["frequency_std"] = self.frequency_std
-            data["damping_std"] = self.damping_std
-        l = self.mode_shape.shape[0]
-        names = tuple(output_names) if output_names is not None else tuple(f"y{k}" for k in range(l))
-        for k in range(l):
-            data[f"mode_shape_{names[k]}"] = self.mode_shape[k]
-        return pd.DataFrame(data, index=pd.RangeIndex(1, self.n_modes + 1, name="mode"))
-
-    def table(self) -> str:
-        """The modes as a plain-text table (frequency in Hz, damping in %)."""
-        unc = self.has_uncertainty
-        head = f"{'mode':>4}  {'f [Hz]':>10}" + (f"  {'std f':>9}" if unc else "") + f"  {'xi [%]':>7}"
-        head += f"  {'std xi':>7}" if unc else ""
-        lines = [head]
-        for i in range(self.n_modes):
-            row = f"{i + 1:>4}  {self.frequency_hz[i]:>10.4f}"
-            if unc:
-                row += f"  {self.frequency_std[i]:>9.4f}"
-            row += f"  {100 * self.damping_ratio[i]:>7.3f}"
-            if unc:
-                row += f"  {100 * self.damping_std[i]:>7.3f}"
-                if self.noise_coupled is not None and self.noise_coupled[i]:
-                    row += "  noise-coupled: no first-order std"
-            lines.append(row)
-        return "\n".join(lines)
-
-    def __str__(self) -> str:
-        if self.degenerate:
-            return f"order {self.order}: no modes ({self.note})"
-        flag = "  (order cuts close singular values: std not meaningful)" if self.close_singular_values else ""
-        return f"order {self.order}: {self.n_modes} modes{flag}\n{self.table()}"
-
-    def __repr__(self) -> str:
-        f = np.array2string(self.frequency_hz, precision=3, separator=", ")
-        return f"Modes(order={self.order}, n_modes={self.n_modes}, frequency_hz={f})"
-
-
-@dataclass(frozen=True, repr=False)
-class Result:
-    """What :func:`identify` returns: the modes at every requested order and the run's status."""
-
-    modes: tuple                      #: tuple of :class:`Modes`, ascending order
-    fs: float                         #: sampling frequency, Hz
-    settings: dict                    #: every setting of the run, for the record
-    singular_values: np.ndarray       #: of the subspace matrix H
-    n_samples: int
-    n_outputs: int
-    n_inputs: int
-    n_columns: int                    #: Hankel columns N
-    n_blocks: int                     #: blocks of the uncertainty (0 without)
-    block_length: int                 #: Hankel columns per block (0 without)
-    channel_mean: np.ndarray          #: mean removed per channel [y, u]
-    input_rank: int = 0               #: numerical rank of R3 (input/output only)
-    input_condition: float = 0.0      #: condition number of R3 (input/output only)
-    input_rank_deficient: bool = False
-    too_few_blocks: bool = False
-    numerical_rank: int = 0           #: singular values of H above max(a, b) eps s_1; higher orders are degenerate
-    signal_to_noise: float = float("nan")  #: s_1 of H over its standard deviation (NaN without uncertainty)
-    low_signal_to_noise: bool = False  #: signal_to_noise < 3: the modes cannot be told from estimation noise
-    #: k*, the noise floor of H (uq-math §5.5): singular values above their own estimation error;
-    #: an estimate of the model order (0 without uncertainty)
-    significant_singular_values: int = 0
-    warnings: tuple = field(default_factory=tuple)
-    output_names: tuple = ()          #: one name per output channel (default y0, y1, ...)
-
-    @property
-    def orders(self) -> tuple:
-        return tuple(m.order for m in self.modes)
-
-    def at_order(self, order: int) -> Modes:
-        """The modes identified at model order ``order`` (one of ``orders``)."""
-        for m in self.modes:
-            if m.order == order:
-                return m
-        raise ValueError(f"order {order} was not identified; identified orders: {list(self.orders)}")
-
-    def __iter__(self):
-        return iter(self.modes)
-
-    def __len__(self) -> int:
-        return len(self.modes)
-
-    def to_dataframe(self):
-        """Every pole of every order, one row each (long format: order, mode, f, xi, std...)."""
-        import pandas as pd
-
-        frames = [m.to_dataframe(self.output_names or None).reset_index() for m in self.modes if m.n_modes]
-        if not frames:
-            return pd.DataFrame(columns=["order", "mode", "frequency_hz", "damping_ratio"])
-        return pd.concat(frames, ignore_index=True)
-
-    def stabilization_diagram(self, criteria=None, **kwargs):
-        """The stabilization diagram of this run (see :func:`modaluq.stabilization_diagram`)."""
-        from .stabilization import stabilization_diagram
-
-        return stabilization_diagram(self, criteria, **kwargs)
-
-    def select_modes(self, criteria=None, settings=None):
-        """Physical modes chosen automatically from the stable poles (see :func:`modaluq.select_modes`)."""
-        from .stabilization import select_modes
-
-        return select_modes(self.stabilization_diagram(criteria), settings)
-
-    def plot(self, ax=None, *, y=None, criteria=None, select: bool = True, **kwargs):
-        """Draw the stabilization diagram with ±σ_f bars (over the output spectrum when ``y`` is given).
-
-        ``select=True`` also marks the automatically selected modes. Returns the Figure.
-        """
-        diagram = self.stabilization_diagram(criteria)
-        selected = None
-        if _boolean("select", select):
-            from .stabilization import select_modes
-
-            selected = select_modes(diagram)
-        return diagram.plot(ax, y=y, selected=selected, **kwargs)
-
-    def __str__(self) -> str:
-        kind = "input/output" if self.n_inputs else "output-only"
-        lines = [
-            f"modaluq SSI-cov ({kind}): {self.n_samples} samples at {self.fs:g} Hz, "
-            f"{self.n_outputs} outputs" + (f", {self.n_inputs} inputs" if self.n_inputs else ""),
-            f"block_rows={self.settings['block_rows']}, past_block_rows={self.settings['past_block_rows']}, "
-            f"orders {self.orders[0]}..{self.orders[-1]} ({len(self.orders)}), "
-            + (f"{self.n_blocks} blocks of {self.block_length} columns" if self.n_blocks else "no uncertainty"),
-        ]
-        lines += [f"warning: {w}" for w in self.warnings]
-        if self.significant_singular_values:
-            lines.append(f"noise floor: {self.significant_singular_values} significant singular values of H")
-        if len(self.modes) <= 3:
-            lines += [str(m) for m in self.modes]
-            return "\n".join(lines)
-        # A diagram: what an engineer reads from it is the selected modes, not its highest order.
-        selected = None
-        if self._has_modes():
-            try:
-                selected = self.stabilization_diagram().select_modes()
-            except (ValueError, ImportError):  # e.g. SciPy missing: fall back to one order
-                selected = None
-        if selected is not None and selected.n_modes:
-            lines.append(str(selected))
-            lines.append(f"(selected from the stabilization diagram of {len(self.modes)} orders; "
-                         "result.at_order(n) gives one order)")
-        else:
-            lines.append(f"no mode selected from the {len(self.modes)} orders; highest order shown "
-                         "(result.at_order(n) gives the others)")
-            lines.append(str(self.modes[-1]))
-        return "\n".join(lines)
-
-    def _has_modes(self) -> bool:
-        """Whether any order has modes (a diagram can be formed)."""
-        return any(m.n_modes for m in self.modes)
-
-    def __repr__(self) -> str:
-        return (f"Result(orders={list(self.orders)[:6]}{'...' if len(self.orders) > 6 else ''}, "
-                f"n_samples={self.n_samples}, n_outputs={self.n_outputs}, n_inputs={self.n_inputs})")
-
-
-def _result_from_core(ident, settings, n_outputs, n_inputs, extra_warnings=(), output_names=()) -> Result:
-    return Result(
-        output_names=tuple(output_names) or tuple(f"y{k}" for k in range(n_outputs)),
-        modes=tuple(Modes._from_core(m) for m in ident.modes),
-        fs=settings["fs"],
-        settings=settings,
-        singular_values=ident.singular_values,
-        n_samples=int(ident.n_samples),
-        n_outputs=n_outputs,
-        n_inputs=n_inputs,
-        n_columns=int(ident.n_columns),
-        n_blocks=int(ident.n_blocks),
-        block_length=int(ident.block_length),
-        channel_mean=ident.channel_mean,
-        input_rank=int(ident.input_rank),
-        input_condition=float(ident.input_condition),
-        input_rank_deficient=bool(ident.input_rank_deficient),
-        too_few_blocks=bool(ident.too_few_blocks),
-        numerical_rank=int(ident.numerical_rank),
-        signal_to_noise=float(ident.signal_to_noise),
-        low_signal_to_noise=bool(ident.low_signal_to_noise),
-        significant_singular_values=int(ident.significant_singular_values),
-        warnings=tuple(ident.warnings) + tuple(extra_warnings),
-    )
-
-
-def _settings(o, n_outputs) -> dict:
-    return {
-        "fs": o.fs,
-        "block_rows": o.block_rows,
-        "past_block_rows": o.past_block_rows or o.block_rows,
-        "orders": list(o.orders),
-        "n_blocks": o.n_blocks if o.uncertainty else None,
-        "references": list(o.references) or list(range(n_outputs)),
-        "uncertainty": o.uncertainty,
-        "demean": o.demean,
-        "input_rcond": o.input_rcond,
-        "threads": o.threads,
-        "freeze_noise": o.freeze_noise,
-        "noise_coupling_limit": o.noise_coupling_limit,
-    }
-
-
-def _warn(result: Result, stacklevel: int = 3) -> None:
-    for w in result.warnings:
-        warnings.warn(w, ModalUQWarning, stacklevel=stacklevel)
-
-
-def identify(y, u=None, *, fs: float, block_rows: int | None = None, past_block_rows: int | None = None,
-             orders: int | Sequence[int] | None = None, n_blocks: int | None = None,
-             references: Sequence[int] | None = None, uncertainty: bool = True, demean: bool = True,
-             input_rcond: float = 1e-10, threads: int = 1, freeze_noise: bool = True,
-             noise_coupling_limit: float = 20.0, frequency_range=None, start: float | None = None,
-             stop: float | None = None, decimate: int | None = None, detrend: str | None = None,
-             highpass: float | None = None, output_names: Sequence[str] | None = None) -> Result:
+def identify(y, u=None, *, fs: float, settings: Settings | None = None,
+             output_names: Sequence[str] | None = None, **keywords) -> Result:
     """Identify modes by covariance-driven SSI, with their standard deviations.
 
     Parameters
@@ -360,6 +45,9 @@ def identify(y, u=None, *, fs: float, block_rows: int | None = None, past_block_
         Measured inputs (forces, ground motion). ``None`` for output-only identification.
     fs : float
         Sampling frequency in Hz.
+    settings : Settings, optional
+        All the settings below in one object (:class:`modaluq.Settings`); keyword arguments
+        given as well replace its fields. The keywords below are the fields of ``Settings``.
     block_rows : int, optional
         Future block rows p of the Hankel covariance (>= 2). Default: chosen from the data
         (:mod:`modaluq.auto_settings`, docs/settings.md): lags of two periods of the band's
@@ -434,7 +122,8 @@ def identify(y, u=None, *, fs: float, block_rows: int | None = None, past_block_
     >>> [round(float(f), 1) for f in modes.frequency_hz]
     [1.9, 5.6, 8.7, 14.5, 15.8, 17.0]
     """
-    fs = _sampling_frequency(fs)
+    fs = check_sampling_frequency(fs)
+    s = make_settings(settings, keywords)
     names = _output_names(output_names, y)
     y = as_samples(y, "y")
     if len(names) not in (0, y.shape[1]):
@@ -443,42 +132,38 @@ def identify(y, u=None, *, fs: float, block_rows: int | None = None, past_block_
     if u is not None and u.shape[0] != y.shape[0]:
         raise ValueError(f"u must have as many samples as y ({y.shape[0]}); got {u.shape[0]}")
     pre = None
-    if any(x is not None for x in (frequency_range, start, stop, decimate, detrend, highpass)):
-        pre = preprocess(y, u, fs=fs, frequency_range=frequency_range, start=start, stop=stop, decimate=decimate,
-                         detrend=detrend, highpass=highpass)
+    if s.preprocessing:
+        pre = preprocess(y, u, fs=fs, **s.preprocessing)
         y, u, fs = pre.y, pre.u, pre.fs
     band = None if pre is None else pre.frequency_range
     chosen = None
-    if block_rows is None or orders is None or n_blocks is None:
-        n_refs = None if references is None else len(_integers("references", references, minimum=0))
+    if s.block_rows is None or s.orders is None or s.n_blocks is None:
+        n_refs = None if s.references is None else len(s.references)
         chosen = choose_settings(y.shape[0], fs, y.shape[1], frequency_range=band, n_references=n_refs,
-                                 block_rows=block_rows, orders=orders, n_blocks=n_blocks)
-        block_rows, orders, n_blocks = chosen.block_rows, chosen.orders, chosen.n_blocks
-    o = core_options(fs=fs, block_rows=block_rows, past_block_rows=past_block_rows, orders=orders,
-                     n_blocks=n_blocks, references=references, uncertainty=uncertainty, demean=demean,
-                     input_rcond=input_rcond, threads=threads, freeze_noise=freeze_noise,
-                     noise_coupling_limit=noise_coupling_limit)
+                                 block_rows=s.block_rows, orders=s.orders, n_blocks=s.n_blocks)
+        s = s.replace(block_rows=chosen.block_rows, orders=chosen.orders, n_blocks=chosen.n_blocks)
+    o = s.to_core(fs)
     u_t = np.empty((0, y.shape[0])) if u is None else u.T
     with single_threaded_blas():
         ident = _core.identify(y.T, u_t, o)
-    settings = _settings(o, y.shape[1])
-    settings["frequency_range"] = None if band is None else list(band)
+    record = s.record(fs, y.shape[1])
+    record["frequency_range"] = None if band is None else list(band)
     if pre is not None:
-        settings["preprocessing"] = pre.settings()
+        record["preprocessing"] = pre.settings()
     if chosen is not None:
-        settings["chosen"] = list(chosen.reasons)
+        record["chosen"] = list(chosen.reasons)
     extra = []
     if chosen is None or not any(r.startswith("block_rows") for r in chosen.reasons):
-        lag = lag_warning(o.block_rows, o.fs, band)
+        lag = lag_warning(s.block_rows, fs, band)
         if lag:
             extra.append(lag)
     else:
-        capped = capped_lag_warning(chosen, o.fs, y.shape[1], band)
+        capped = capped_lag_warning(chosen, fs, y.shape[1], band)
         if capped:
             extra.append(capped)
-    result = _result_from_core(ident, settings, y.shape[1], 0 if u is None else u.shape[1], extra_warnings=extra,
-                               output_names=names)
-    _warn(result)
+    result = result_from_core(ident, record, y.shape[1], 0 if u is None else u.shape[1], extra_warnings=extra,
+                              output_names=names)
+    warn_all(result)
     return result
 
 

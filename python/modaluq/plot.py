@@ -19,9 +19,15 @@ import io
 import numpy as np
 from matplotlib.figure import Figure
 
-from .identification import _boolean, _integer
+from .checks import check_boolean, check_integer
+from .settings import PoleStatus
+from .spectrum import output_spectrum_singular_values
+from .stabilization import Diagram
 
-__all__ = ["STATUS_STYLE", "mode_shapes", "stabilization_diagram"]
+__all__ = ["DIAGRAM_FIGSIZE", "STATUS_STYLE", "plot_mode_shapes", "plot_stabilization_diagram"]
+
+#: Size in inches of a new stabilization diagram (the command line's figures too).
+DIAGRAM_FIGSIZE = (9.0, 6.0)
 
 #: How each pole status is drawn: (marker, colour, face colour, marker size, legend label).
 STATUS_STYLE = {
@@ -58,11 +64,11 @@ SPECTRUM_DECADES_FLOOR = 1e-6
 MIN_BAND_FRACTION = 0.004
 
 
-def stabilization_diagram(diagram, ax=None, *, y=None, spectrum=None, selected=None, show_rejected=True,
-                          nperseg=None, frequency_range=None, figsize=(9.0, 6.0)):
+def plot_stabilization_diagram(diagram, ax=None, *, y=None, spectrum=None, selected=None, show_rejected=True,
+                               nperseg=None, frequency_range=None, figsize=DIAGRAM_FIGSIZE):
     """Stabilization diagram: every pole at (frequency, model order) with ±σ_f horizontal bars.
 
-    Poles are marked by :class:`~modaluq.stabilization.PoleStatus` (see ``STATUS_STYLE``);
+    Poles are marked by :class:`~modaluq.PoleStatus` (see ``STATUS_STYLE``);
     non-rejected poles carry horizontal error bars of ±1 analytic standard deviation of the
     frequency (rejected poles are drawn without bars: theirs often span the whole axis). When
     output samples are given, the singular values of their cross power spectral density matrix
@@ -71,14 +77,14 @@ def stabilization_diagram(diagram, ax=None, *, y=None, spectrum=None, selected=N
 
     Parameters
     ----------
-    diagram : modaluq.stabilization.Diagram
+    diagram : modaluq.Diagram
     ax : matplotlib.axes.Axes, optional
         Where to draw; a new figure when None.
     y : array_like, shape (n_samples, n_outputs), optional
         Output samples of the identification, for the spectrum background.
     spectrum : tuple (frequency_hz, singular_values), optional
-        A precomputed :func:`~modaluq.stabilization.output_spectrum_singular_values` (instead of ``y``).
-    selected : modaluq.stabilization.SelectedModes, optional
+        A precomputed :func:`~modaluq.spectrum.output_spectrum_singular_values` (instead of ``y``).
+    selected : modaluq.SelectedModes, optional
         Modes to mark.
     show_rejected : bool
         Draw the rejected poles (grey dots), default True.
@@ -98,13 +104,11 @@ def stabilization_diagram(diagram, ax=None, *, y=None, spectrum=None, selected=N
         ``"<label> (<count>)"``. Noise-coupled poles that are not rejected (their σ is not a
         first-order value, docs/uq-math.md §5.5) are drawn without a σ bar and ringed.
     """
-    from .stabilization import Diagram, PoleStatus, output_spectrum_singular_values
-
     if not isinstance(diagram, Diagram):
         raise TypeError(f"diagram must be a modaluq Diagram; got {type(diagram).__name__}")
     if y is not None and spectrum is not None:
         raise TypeError("pass y or spectrum, not both")
-    show_rejected = _boolean("show_rejected", show_rejected)
+    show_rejected = check_boolean("show_rejected", show_rejected)
     fig, ax = _axes(ax, figsize)
 
     spec_ax = None
@@ -189,7 +193,7 @@ def stabilization_diagram(diagram, ax=None, *, y=None, spectrum=None, selected=N
     return fig
 
 
-def mode_shapes(modes, fig=None, *, channel_positions=None, ncols=3, figsize=None):
+def plot_mode_shapes(modes, fig=None, *, channel_positions=None, ncols=3, figsize=None):
     """Bar charts of mode shapes, real and imaginary parts, with ±1σ error bars.
 
     Shapes are normalised so that their largest-modulus component is 1 (its σ is 0 by
@@ -229,7 +233,7 @@ def mode_shapes(modes, fig=None, *, channel_positions=None, ncols=3, figsize=Non
         x = np.asarray(channel_positions, dtype=float)
         if x.shape != (n_out,):
             raise ValueError(f"channel_positions must have {n_out} entries; got shape {x.shape}")
-    ncols = max(1, min(_integer("ncols", ncols, minimum=1), n_modes))
+    ncols = max(1, min(check_integer("ncols", ncols, minimum=1), n_modes))
     nrows = max(1, -(-n_modes // ncols))
     # Many channels: horizontal bars, one labelled row per channel (names side by side overlap).
     horizontal = n_out > HORIZONTAL_SHAPES_ABOVE

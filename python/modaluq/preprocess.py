@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ._checks import _integer, _real, _sampling_frequency, as_samples
+from .checks import as_samples, check_integer, check_real, check_sampling_frequency
 
 __all__ = ["Preprocessed", "preprocess", "decimation_factor", "OVERSAMPLING", "DETREND"]
 
@@ -78,9 +78,9 @@ def decimation_factor(fs: float, f_high: float, *, oversampling: float = OVERSAM
     >>> decimation_factor(50.0, 20.0)
     1
     """
-    fs = _sampling_frequency(fs)
-    f_high = _real("f_high", f_high, low=0, low_open=True)
-    oversampling = _real("oversampling", oversampling, low=2, low_open=True)
+    fs = check_sampling_frequency(fs)
+    f_high = check_real("f_high", f_high, low=0, low_open=True)
+    oversampling = check_real("oversampling", oversampling, low=2, low_open=True)
     return max(1, int(math.floor(fs / (oversampling * f_high) + 1e-9)))
 
 
@@ -91,8 +91,8 @@ def _frequency_range(frequency_range, fs):
         lo, hi = frequency_range
     except (TypeError, ValueError):
         raise TypeError(f"frequency_range must be a pair (f_low, f_high) in Hz; got {frequency_range!r}") from None
-    lo = _real("frequency_range[0]", lo, low=0)
-    hi = _real("frequency_range[1]", hi, low=0, low_open=True)
+    lo = check_real("frequency_range[0]", lo, low=0)
+    hi = check_real("frequency_range[1]", hi, low=0, low_open=True)
     if not lo < hi:
         raise ValueError(f"frequency_range must have f_low < f_high; got ({lo:g}, {hi:g}) Hz")
     if hi >= fs / 2:
@@ -140,7 +140,7 @@ def preprocess(y, u=None, *, fs, frequency_range=None, start=None, stop=None, de
     >>> p.decimation, p.fs, p.n_samples
     (4, 106.25, 9563)
     """
-    fs = _sampling_frequency(fs)
+    fs = check_sampling_frequency(fs)
     y = as_samples(y, "y")
     u = as_samples(u, "u", allow_none=True)
     if u is not None and u.shape[0] != y.shape[0]:
@@ -148,8 +148,8 @@ def preprocess(y, u=None, *, fs, frequency_range=None, start=None, stop=None, de
     band = _frequency_range(frequency_range, fs)
     n = y.shape[0]
     duration = n / fs
-    t0 = _real("start", start, low=0, allow_none=True)
-    t1 = _real("stop", stop, low=0, low_open=True, allow_none=True)
+    t0 = check_real("start", start, low=0, allow_none=True)
+    t1 = check_real("stop", stop, low=0, low_open=True, allow_none=True)
     first = 0 if t0 is None else int(round(t0 * fs))
     last = n if t1 is None else min(n, int(round(t1 * fs)))
     if first >= n:
@@ -171,7 +171,7 @@ def preprocess(y, u=None, *, fs, frequency_range=None, start=None, stop=None, de
         u = None if u is None else sp_detrend(u, axis=0, type=detrend)
         steps.append(f"{detrend} detrend")
 
-    hp = _real("highpass", highpass, low=0, low_open=True, allow_none=True)
+    hp = check_real("highpass", highpass, low=0, low_open=True, allow_none=True)
     if hp is not None:
         if hp >= fs / 2:
             raise ValueError(f"highpass must be below fs/2 = {fs / 2:g} Hz; got {hp:g}")
@@ -187,7 +187,7 @@ def preprocess(y, u=None, *, fs, frequency_range=None, start=None, stop=None, de
     if decimate is None:
         q = 1 if band is None else decimation_factor(fs, band[1])
     else:
-        q = _integer("decimate", decimate, minimum=1)
+        q = check_integer("decimate", decimate, minimum=1)
         if band is not None and fs / q < 2.0 * band[1] * 1.25:
             raise ValueError(f"decimate = {q} leaves fs = {fs / q:g} Hz, too low for the band's upper edge "
                              f"{band[1]:g} Hz (keep fs/decimate >= 2.5 x {band[1]:g} Hz; use decimate <= "

@@ -1,6 +1,6 @@
 """Simulated vibration data: the damped mass-spring chain of the paper's §5.1.
 
-The reference test case (``uq-math.md`` §11.1; Mellinger, Döhler & Mevel, §5.1) is a
+The reference test case (docs/uq-math.md §11.1; Mellinger, Döhler & Mevel, §5.1) is a
 chain of six masses fixed to the ground at one end and free at the other::
 
     ground --k1-- m1 --k2-- m2 --k3-- m3 --k4-- m4 --k5-- m5 --k6-- m6
@@ -34,14 +34,13 @@ from __future__ import annotations
 import math
 import warnings
 from dataclasses import dataclass
-
 from typing import Iterable
 
 import numpy as np
 import scipy.linalg
 import scipy.signal
 
-from .identification import _integer, _real, _sampling_frequency, as_samples
+from .checks import as_samples, check_integer, check_real, check_sampling_frequency
 
 __all__ = [
     "Simulation",
@@ -85,7 +84,7 @@ def _dof_tuple(name, dofs, n_dof, *, allow_empty):
         raise TypeError(f"{name} must be a sequence of DOF indices, got {dofs!r}")
     out = []
     for d in dofs:
-        d = _integer(name, d)
+        d = check_integer(name, d)
         if not 0 <= d < n_dof:
             raise ValueError(f"{name} entry {d} is out of range for n_dof={n_dof} "
                              f"(valid: 0 .. {n_dof - 1})")
@@ -149,7 +148,7 @@ def chain_system(n_dof=6, *, mass=1 / 20, stiffness=None, damping_ratio=0.02):
     >>> np.round(np.sqrt(scipy.linalg.eigvalsh(K, M)) / (2 * np.pi), 4)
     array([ 1.9297,  5.618 ,  8.6824, 14.4938, 15.8462, 17.0114])
     """
-    n_dof = _integer("n_dof", n_dof, minimum=1)
+    n_dof = check_integer("n_dof", n_dof, minimum=1)
     m = _per_dof("mass", mass, n_dof, lower=0.0)
     if stiffness is None:
         k = np.where(np.arange(n_dof) % 2 == 0, 100.0, 200.0)
@@ -211,7 +210,7 @@ def state_space(M, K, Cdamp, *, fs, output_dofs):
     """
     M, K, Cdamp = _system_matrices(M, K, Cdamp)
     n_dof = M.shape[0]
-    fs = _sampling_frequency(fs)
+    fs = check_sampling_frequency(fs)
     output_dofs = _dof_tuple("output_dofs", output_dofs, n_dof, allow_empty=False)
     Ac, Bc = _continuous(M, K, Cdamp)
     n = 2 * n_dof
@@ -411,7 +410,7 @@ def acceleration_response(force, M, K, Cdamp, *, fs, output_dofs):
     """
     M, K, Cdamp = _system_matrices(M, K, Cdamp)
     n_dof = M.shape[0]
-    fs = _sampling_frequency(fs)
+    fs = check_sampling_frequency(fs)
     output_dofs = _dof_tuple("output_dofs", output_dofs, n_dof, allow_empty=False)
     force = as_samples(force, "force", n_channels=n_dof)
     y = np.empty((force.shape[0], len(output_dofs)))
@@ -434,7 +433,7 @@ def default_output_dofs(n_dof):
     >>> default_output_dofs(10)
     (0, 2, 3, 5, 6, 8, 9)
     """
-    n_dof = _integer("n_dof", n_dof, minimum=1)
+    n_dof = check_integer("n_dof", n_dof, minimum=1)
     if n_dof == 6:
         return PAPER_OUTPUT_DOFS
     n_out = min(n_dof, math.ceil(2 * n_dof / 3))
@@ -570,13 +569,13 @@ def simulate(n_samples=10_000, *, seed=None, n_dof=6, output_dofs=None, input_do
     >>> np.round(sim.frequency_hz, 3)
     array([ 1.93 ,  5.618,  8.682, 14.494, 15.846, 17.011])
     """
-    n_samples = _integer("n_samples", n_samples, minimum=1)
-    n_dof = _integer("n_dof", n_dof, minimum=1)
-    fs = _sampling_frequency(fs)
-    input_std = _real("input_std", input_std, low=0.0, low_open=True)
-    unknown_input_std = _real("unknown_input_std", unknown_input_std, low=0.0)
-    noise_std = _real("noise_std", noise_std, low=0.0)
-    discard = _integer("discard", discard, minimum=0)
+    n_samples = check_integer("n_samples", n_samples, minimum=1)
+    n_dof = check_integer("n_dof", n_dof, minimum=1)
+    fs = check_sampling_frequency(fs)
+    input_std = check_real("input_std", input_std, low=0.0, low_open=True)
+    unknown_input_std = check_real("unknown_input_std", unknown_input_std, low=0.0)
+    noise_std = check_real("noise_std", noise_std, low=0.0)
+    discard = check_integer("discard", discard, minimum=0)
     if output_dofs is None:
         output_dofs = default_output_dofs(n_dof)
     output_dofs = _dof_tuple("output_dofs", output_dofs, n_dof, allow_empty=False)
@@ -589,7 +588,11 @@ def simulate(n_samples=10_000, *, seed=None, n_dof=6, output_dofs=None, input_do
                       f"frequency fs/2 = {fs / 2:.4g} Hz; it will alias", RuntimeWarning,
                       stacklevel=2)
 
-    rng = np.random.default_rng(seed)
+    try:
+        rng = np.random.default_rng(seed)
+    except (TypeError, ValueError) as exc:  # numpy's message names a SeedSequence, not the argument
+        raise TypeError(f"seed must be None, a non-negative integer, a SeedSequence or a Generator; "
+                        f"got {seed!r}") from exc
     n_total = n_samples + discard
     u_all = rng.standard_normal((n_total, len(input_dofs)))
     u_all *= input_std

@@ -12,8 +12,10 @@ import numpy as np
 
 from . import _core
 from ._blas import single_threaded as single_threaded_blas
-from .identification import (Result, _boolean, _integer, _integers, _result_from_core, _settings, _warn, as_samples,
-                             core_options)
+from .checks import as_samples, check_boolean, check_integer, check_integers
+from .identification import make_settings
+from .results import Result, result_from_core, warn_all
+from .settings import PREPROCESSING_FIELDS, Settings
 
 __all__ = ["CovarianceAccumulator"]
 
@@ -50,16 +52,18 @@ class CovarianceAccumulator:
                  references: Sequence[int] | None = None, block_length: int, demean: bool = True,
                  first_sample: int = 0):
         layout = _core.HankelLayout()
-        layout.n_outputs = _integer("n_outputs", n_outputs, minimum=1)
-        layout.n_inputs = _integer("n_inputs", n_inputs, minimum=0)
-        layout.block_rows = _integer("block_rows", block_rows, minimum=2)
-        layout.past_block_rows = 0 if past_block_rows is None else _integer("past_block_rows", past_block_rows, minimum=1)
-        layout.references = [] if references is None else _integers("references", references, minimum=0)
+        layout.n_outputs = check_integer("n_outputs", n_outputs, minimum=1)
+        layout.n_inputs = check_integer("n_inputs", n_inputs, minimum=0)
+        layout.block_rows = check_integer("block_rows", block_rows, minimum=2)
+        layout.past_block_rows = (0 if past_block_rows is None
+                                  else check_integer("past_block_rows", past_block_rows, minimum=1))
+        layout.references = [] if references is None else check_integers("references", references, minimum=0)
         # first_sample counts a whole stream (months of samples), not one array: only the core's
         # 64-bit index bounds it
-        self._acc = _core.CovarianceAccumulator(layout, _integer("block_length", block_length, minimum=1, maximum=2**50),
-                                                _boolean("demean", demean),
-                                                _integer("first_sample", first_sample, minimum=0, maximum=2**62))
+        self._acc = _core.CovarianceAccumulator(layout,
+                                                check_integer("block_length", block_length, minimum=1, maximum=2**50),
+                                                check_boolean("demean", demean),
+                                                check_integer("first_sample", first_sample, minimum=0, maximum=2**62))
 
     @property
     def n_samples(self) -> int:
@@ -98,20 +102,29 @@ class CovarianceAccumulator:
 
     def covariances(self, with_blocks: bool = True):
         """The covariances R1..R4 (and per-block covariances) of everything pushed so far."""
-        return self._acc.finish(_boolean("with_blocks", with_blocks))
+        return self._acc.finish(check_boolean("with_blocks", with_blocks))
 
-    def identify(self, *, fs: float, orders, uncertainty: bool = True, input_rcond: float = 1e-10,
-                 threads: int = 1, freeze_noise: bool = True, noise_coupling_limit: float = 20.0) -> Result:
-        """Identify from everything pushed so far (see :func:`modaluq.identify`)."""
+    def identify(self, *, fs: float, orders, settings: Settings | None = None, **keywords) -> Result:
+        """Identify from everything pushed so far (see :func:`modaluq.identify`).
+
+        ``settings`` / ``keywords`` as there, except what the accumulator fixed when it was made
+        (horizons, references, ``demean``) and the preprocessing (the samples are already summed).
+        """
+        s = make_settings(settings, dict(keywords, orders=orders), function="CovarianceAccumulator.identify")
+        fixed = ("block_rows", "past_block_rows", "references", "demean") + PREPROCESSING_FIELDS
+        default = Settings()
+        given = [k for k in fixed if getattr(s, k) != getattr(default, k)]
+        if given:
+            raise TypeError(f"CovarianceAccumulator.identify: {given[0]} is fixed when the accumulator is made "
+                            "(or, for preprocessing, before the samples are pushed)")
         layout = self._acc.layout
-        o = core_options(fs=fs, block_rows=layout.block_rows, past_block_rows=layout.past_block_rows or None,
-                         orders=orders, n_blocks=2, references=list(layout.references) or None,
-                         uncertainty=uncertainty, demean=self._acc.demean, input_rcond=input_rcond,
-                         threads=threads, freeze_noise=freeze_noise, noise_coupling_limit=noise_coupling_limit)
-        cov = self._acc.finish(o.uncertainty)
-        o.n_blocks = max(int(cov.n_blocks), 2)
+        cov = self._acc.finish(s.uncertainty)
+        s = s.replace(block_rows=layout.block_rows, past_block_rows=layout.past_block_rows or None,
+                      references=tuple(layout.references) or None, demean=self._acc.demean,
+                      n_blocks=max(int(cov.n_blocks), 2))
+        o = s.to_core(fs)
         with single_threaded_blas():  # the covariance pass uses no BLAS; the propagation does
             ident = _core.identify_covariances(cov, o)
-        result = _result_from_core(ident, _settings(o, layout.n_outputs), layout.n_outputs, layout.n_inputs)
-        _warn(result)
+        result = result_from_core(ident, s.record(o.fs, layout.n_outputs), layout.n_outputs, layout.n_inputs)
+        warn_all(result)
         return result

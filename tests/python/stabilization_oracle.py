@@ -11,8 +11,7 @@ import math
 
 import numpy as np
 
-from modaluq.stabilization import (ClusteringSettings, Diagram, PoleStatus, SelectedModes, StabilityCriteria,
-                                   modal_assurance_criterion)
+from modaluq import ClusteringSettings, Diagram, PoleStatus, SelectedModes, StabilityCriteria, modal_assurance_criterion
 
 
 def _pct(x: float) -> str:
@@ -52,7 +51,7 @@ def stabilization_diagram_reference(result, criteria: StabilityCriteria | None =
     Diagram
         Every pole with its :class:`PoleStatus` and, for the others than stable, the reason.
     """
-    from modaluq.identification import Result
+    from modaluq.results import Result
 
     if not isinstance(result, Result):
         raise TypeError(f"result must be a modaluq.Result (from modaluq.identify); got {type(result).__name__}")

@@ -12,7 +12,7 @@ import pytest
 
 import modaluq
 from modaluq.cli import main
-from modaluq.cli_identify import parse_orders
+from modaluq.cli.identify import parse_orders
 
 HEADER = ["time [s]", "acc1 [m/s^2]", "acc2 [m/s^2]", "acc5 [m/s^2]", "force [N]"]
 
@@ -54,7 +54,7 @@ def test_parse_orders_errors_name_the_option(text, match):
 
 
 def test_parse_read_options():
-    from modaluq.cli_identify import parse_read_options
+    from modaluq.cli.identify import parse_read_options
 
     assert parse_read_options(["dataset=/daq/acc", "transpose=true", "records=[0, 2]", "fs_hint=2.5"]) == {
         "dataset": "/daq/acc", "transpose": True, "records": [0, 2], "fs_hint": 2.5}

@@ -189,15 +189,17 @@ def test_a_strong_machine_harmonic_between_modes_is_not_reported_as_a_mode(seed,
     the diagram has a pole with |ξ| < 0.1 % at the harmonic at most orders (checked, so that the test
     exercises something; its near-zero or negative damping is what keeps it out of the selection). The
     harmonic must not be reported as a physical mode without a flag: a selected mode within 1 % of
-    it must be flagged by ``possible_harmonics`` as cli_identify calls it (kurtosis of the
+    it must be flagged by ``possible_harmonics`` as ``modaluq identify`` (Analysis.run) calls it (kurtosis of the
     band-passed response, on the preprocessed record), and the kurtosis test does flag the
     harmonic's frequency. The six structural modes must be selected within 1 % and not flagged,
     and no other unflagged mode may be selected."""
     if not with_input and harmonic_hz == 4.0 and seed == 2:
         # Known limit (issue 12 closing note): a twin of mode 6 (16.961 Hz, ξ 0.43 %) stays selected
         # because the MAC between the poles nearest the two medians is 0.772, under
-        # doublet_min_mac = 0.8. The harmonic itself is handled correctly.
-        request.applymarker(pytest.mark.xfail(strict=True, reason="twin of mode 6 with MAC 0.77 < 0.8 kept"))
+        # doublet_min_mac = 0.8. The harmonic itself is handled correctly. Not strict: the MAC is
+        # that close to the limit that SciPy's resampling filter of another release (or another
+        # BLAS) moves it across (the twin is dropped with the SciPy of some machines).
+        request.applymarker(pytest.mark.xfail(strict=False, reason="twin of mode 6 with MAC 0.77 < 0.8 kept"))
     sim, y = chain_with_machine(seed, harmonic_hz)
     band = (1.0, 20.0)
     u = sim.u if with_input else None

@@ -20,6 +20,8 @@ def test_kurtosis_of_a_sinusoid_and_of_a_random_mode():
     assert np.isnan(harmonic_kurtosis(noise, 100.0, [49.5])[0])  # the band does not fit below fs/2
 
 
+# block_rows 40 (lags of 0.8 s) keeps the test fast; identify warns that 1 Hz wants longer lags
+@pytest.mark.filterwarnings("ignore:block_rows = 40 gives lags:modaluq.ModalUQWarning")
 def test_a_machine_harmonic_in_the_band_is_flagged_and_the_modes_are_not():
     sim = modaluq.simulate(60_000, seed=4)
     t = np.arange(sim.n_samples) / sim.fs

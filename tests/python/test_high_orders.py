@@ -11,7 +11,7 @@ is 3-20 above the true order, and pass with margin on the frozen one.
 import numpy as np
 import pytest
 
-from modaluq.validation import METHODS, monte_carlo
+from modaluq.validation import monte_carlo
 
 N_RECORDS = 100
 CASES = {

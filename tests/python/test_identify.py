@@ -2,7 +2,6 @@
 
 import threading
 import time
-import warnings
 
 import numpy as np
 import pytest
@@ -116,7 +115,7 @@ def test_one_dimensional_y_and_integer_data(chain):
 def test_binding_does_not_copy_samples(chain):
     y = np.ascontiguousarray(chain.y)
     assert _core._data_pointer(y.T) == y.__array_interface__["data"][0]
-    prepared = modaluq.identification.as_samples(y, "y")
+    prepared = modaluq.checks.as_samples(y, "y")
     assert prepared is y or prepared.__array_interface__["data"][0] == y.__array_interface__["data"][0]
     # A copy is never made silently: a non-contiguous view is refused by the binding itself.
     with pytest.raises(TypeError):

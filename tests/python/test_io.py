@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import pickle
 import re
@@ -13,8 +14,7 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 
-from modaluq.io import Recording, load
-from modaluq.io import from_sep005, to_sep005
+from modaluq.io import Recording, from_sep005, load, to_sep005
 
 FS = 200.0
 N = 400
@@ -184,7 +184,7 @@ class TestRecording:
 
     def test_frozen(self, samples):
         r = Recording.from_arrays(samples, FS)
-        with pytest.raises(Exception):
+        with pytest.raises(dataclasses.FrozenInstanceError):
             r.fs = 3.0
 
     @pytest.mark.parametrize("bad", [{"a": 1}, 3.5, [1.5], [True], "nope"])

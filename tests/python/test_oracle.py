@@ -1,9 +1,9 @@
 """Self-checks of the NumPy reference oracle (tests/python/oracle.py).
 
 Independent of the C++ core: every explicit Jacobian of the oracle is compared with
-central finite differences (FD) of the stage it differentiates (uq-math §11.2), the data
+central finite differences (FD) of the stage it differentiates (docs/uq-math.md §11.2), the data
 matrices with a hand-written per-sample loop, and the propagated standard deviations with
-unit-invariance properties (uq-math §4.1, §10.1).
+unit-invariance properties (docs/uq-math.md §4.1, §10.1).
 
 Test systems: a 3-DOF mass-spring chain (1.42, 3.97, 5.74 Hz, 2 % modal damping), exactly
 discretised (zero-order hold, augmented matrix exponential), fs = 20 Hz, white forces at
@@ -298,7 +298,7 @@ def test_jacobian_AC_Gamma_fd(case):
     Jfd = fd_jacobian(f, x, np.full(x.size, FD_REL_STEP * np.abs(x).max()))
     assert rel_err(J[:n * n], Jfd[:n * n]) < FD_TOL          # J_{A,Gamma}
     assert rel_err(J, Jfd) < FD_TOL
-    # the least-squares residual term is needed on noisy data (uq-math §6): without it
+    # the least-squares residual term is needed on noisy data (docs/uq-math.md §6): without it
     # J_{A,Gamma} misses FD by far more than the FD truncation error
     l, a = case.l, case.a
     up = case.G[:-l]

@@ -5,12 +5,14 @@ import numpy as np
 import pytest
 
 import modaluq
-from modaluq.stabilization import PoleStatus, output_spectrum_singular_values
+from modaluq import PoleStatus
+from modaluq.spectrum import output_spectrum_singular_values
 
 matplotlib = pytest.importorskip("matplotlib")
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
-from modaluq.plot import STATUS_STYLE, mode_shapes, stabilization_diagram  # noqa: E402
+
+from modaluq.plot import STATUS_STYLE, plot_mode_shapes, plot_stabilization_diagram  # noqa: E402
 
 
 @pytest.fixture(scope="module")
@@ -87,7 +89,7 @@ def test_diagram_options(small_chain):
     assert _container(ax, PoleStatus.REJECTED) is None
     assert ax.get_xlim() == (1.0, 10.0)
     with pytest.raises(TypeError, match="diagram"):
-        stabilization_diagram(sim)
+        plot_stabilization_diagram(sim)
 
 
 def test_mode_shape_bars_and_error_bars(small_chain):
@@ -107,7 +109,7 @@ def test_mode_shape_bars_and_error_bars(small_chain):
         assert [t.get_text() for t in ax.get_xticklabels()] == ["m1", "m2", "m5"]
     # also works on the Modes of one order (no output names, same σ fields)
     modes = modaluq.identify(sim.y, sim.u, fs=sim.fs, block_rows=15, orders=12).at_order(12)
-    fig2 = mode_shapes(modes)
+    fig2 = plot_mode_shapes(modes)
     assert sum(ax.get_visible() for ax in fig2.axes) == modes.n_modes
     assert [t.get_text() for t in fig2.axes[0].get_xticklabels()] == ["y0", "y1", "y2"]
 
@@ -150,7 +152,7 @@ def test_plots_do_not_pile_up_in_pyplot(small_chain, tmp_path):
     result = modaluq.identify(sim.y[:5000], fs=sim.fs, block_rows=8, orders=range(2, 13, 2), n_blocks=10)
     before = plt.get_fignums()
     for _ in range(5):
-        figs = [d.plot(), sel.plot(), stabilization_diagram(d), mode_shapes(sel), result.plot(),
+        figs = [d.plot(), sel.plot(), plot_stabilization_diagram(d), plot_mode_shapes(sel), result.plot(),
                 result.select_modes().plot()]
     assert plt.get_fignums() == before == []
     # still ordinary figures: they save, and a given Axes is drawn into (pyplot's, if the caller wants a window)
@@ -187,11 +189,11 @@ def test_plot_switches_must_be_booleans(small_chain):
     with pytest.raises(TypeError, match="show_rejected must be True or False; got 'no'"):
         d.plot(show_rejected="no")
     with pytest.raises(TypeError, match="ncols must be an integer"):
-        mode_shapes(sel, ncols=2.0)
+        plot_mode_shapes(sel, ncols=2.0)
 
 
 def test_noise_coupled_poles_are_ringed_without_a_bar():
-    """Orders far above the true one have spurious poles whose σ is not first-order (uq-math §5.5)."""
+    """Orders far above the true one have spurious poles whose σ is not first-order (docs/uq-math.md §5.5)."""
     sim = modaluq.simulate(100_000, seed=1)  # the tutorial's record and settings
     result = modaluq.identify(sim.y, sim.u, fs=sim.fs, block_rows=25, orders=range(2, 61, 2))
     d = modaluq.stabilization_diagram(result)
@@ -221,7 +223,7 @@ def test_many_channels_get_horizontal_bars_with_one_readable_label_each():
     modes = SimpleNamespace(mode_shape=shape / np.abs(shape).max(axis=0), frequency_hz=np.array([3.1, 4.5]),
                             damping_ratio=np.array([0.02, 0.01]), output_names=names,
                             mode_shape_std_real=np.full((n_out, 2), 0.02), mode_shape_std_imag=np.full((n_out, 2), 0.01))
-    fig = mode_shapes(modes)
+    fig = plot_mode_shapes(modes)
     ax = fig.axes[0]
     assert [t.get_text() for t in ax.get_yticklabels()] == list(names)   # one label per channel, on the y axis
     assert ax.get_xlim() == (-1.15, 1.15)

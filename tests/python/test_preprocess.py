@@ -9,11 +9,18 @@ import numpy as np
 import pytest
 
 import modaluq
-from modaluq.auto_settings import (BLOCK_SPAN, CENTRE_PERIODS, LAG_PERIODS, MAX_BLOCKS, MAX_ROWS, choose_settings,
-                                   lag_warning)
+from modaluq import PoleStatus
+from modaluq.auto_settings import (
+    BLOCK_SPAN,
+    CENTRE_PERIODS,
+    LAG_PERIODS,
+    MAX_BLOCKS,
+    MAX_ROWS,
+    choose_settings,
+    lag_warning,
+)
 from modaluq.cli import main
 from modaluq.preprocess import decimation_factor, preprocess
-from modaluq.stabilization import PoleStatus
 
 DATA = pathlib.Path(__file__).resolve().parents[3] / "shared" / "data"
 

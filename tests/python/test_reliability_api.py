@@ -11,7 +11,7 @@ import pytest
 
 import modaluq
 from modaluq.simulate import acceleration_response, chain_system
-from modaluq.stabilization import output_spectrum_singular_values
+from modaluq.spectrum import output_spectrum_singular_values
 from modaluq.validation import monte_carlo
 
 FAST = dict(block_rows=6, orders=8, n_blocks=10)

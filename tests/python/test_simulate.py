@@ -1,4 +1,4 @@
-"""Tests of modaluq.simulate: the paper's 6-DOF chain (uq-math.md §11.1, paper §5.1)."""
+"""Tests of modaluq.simulate: the paper's 6-DOF chain (docs/uq-math.md §11.1, paper §5.1)."""
 
 import time
 
@@ -16,7 +16,7 @@ from modaluq.simulate import (
     state_space,
 )
 
-# Printed in uq-math.md §11.1 (4 decimals) and in the paper's Table 1 (4 significant digits).
+# Printed in docs/uq-math.md §11.1 (4 decimals) and in the paper's Table 1 (4 significant digits).
 DESIGN_FREQUENCIES_HZ = [1.9297, 5.6180, 8.6824, 14.4938, 15.8462, 17.0114]
 PAPER_FREQUENCIES_HZ = [1.930, 5.618, 8.682, 14.49, 15.85, 17.01]
 
@@ -78,7 +78,7 @@ def test_true_frequencies_of_default_chain():
 
 
 def test_other_stiffness_arrangements_do_not_match_paper():
-    # uq-math.md §11.1: only k = (100, 200, 100, 200, 100, 200) from the ground matches.
+    # docs/uq-math.md §11.1: only k = (100, 200, 100, 200, 100, 200) from the ground matches.
     for k in ([200, 100, 200, 100, 200, 100], [100, 100, 100, 200, 200, 200]):
         M, K, _ = chain_system(stiffness=k)
         f = np.sqrt(scipy.linalg.eigvalsh(K, M)) / (2 * np.pi)
@@ -110,7 +110,7 @@ def test_mode_shapes_normalised_and_equal_to_undamped_shapes():
     ref = np.argmax(np.abs(shape), axis=0)
     assert np.all(shape[ref, np.arange(6)] == 1.0)  # exactly 1 + 0j
     assert np.all(np.abs(shape) <= 1.0 + 1e-12)
-    # uq-math.md §11.3 reports the reference components k = [2, 1, 0, 2, 0, 1].
+    # docs/uq-math.md §11.3 reports the reference components k = [2, 1, 0, 2, 0, 1].
     np.testing.assert_array_equal(ref, [2, 1, 0, 2, 0, 1])
     # Modal damping: the shapes are the real undamped shapes at the outputs.
     M_ref, K_ref = _paper_chain_by_hand()
@@ -340,6 +340,10 @@ def test_a_non_integer_count_is_a_type_error_as_in_identify():
     # The same mistake raises the same exception in every entry point (identify: TypeError).
     with pytest.raises(TypeError, match="n_samples"):
         simulate(10.5, seed=0)
+    with pytest.raises(TypeError, match="seed must be None, a non-negative integer"):
+        simulate(100, seed=1.5)
+    with pytest.raises(TypeError, match="seed must be"):
+        simulate(100, seed=-1)
 
 
 def test_nyquist_warning():

@@ -11,9 +11,16 @@ import numpy as np
 import pytest
 
 import modaluq
-from modaluq.identification import Modes, Result
-from modaluq.stabilization import (ClusteringSettings, Diagram, PoleStatus, StabilityCriteria,
-                                   modal_assurance_criterion, select_modes, stabilization_diagram)
+from modaluq import (
+    ClusteringSettings,
+    Diagram,
+    PoleStatus,
+    StabilityCriteria,
+    modal_assurance_criterion,
+    select_modes,
+    stabilization_diagram,
+)
+from modaluq.results import Modes, Result
 
 SHAPE_A = (1.0, 0.5, -0.3)
 SHAPE_B = (0.2, -0.7, 1.0)
@@ -398,7 +405,7 @@ def test_diagram_to_netcdf_round_trip(chain_selection, tmp_path):
 
 
 def test_noise_coupled_poles_are_a_column_and_never_the_representative():
-    """A pole whose σ is not first-order (uq-math §5.5) is kept in its cluster but never read from."""
+    """A pole whose σ is not first-order (docs/uq-math.md §5.5) is kept in its cluster but never read from."""
     poles = two_modes_and_a_spurious_pole()
     for n in (12, 14, 16):  # the members nearest the cluster's median frequency
         for p in poles[n]:

@@ -16,8 +16,15 @@ import pytest
 
 import modaluq
 from modaluq.cli import main
-from modaluq.validation import (METHODS, PAPER_TABLE_1, PAPER_TABLE_2, MonteCarloResult, match_modes,
-                                monte_carlo, record_seed)
+from modaluq.validation import (
+    METHODS,
+    PAPER_TABLE_1,
+    PAPER_TABLE_2,
+    MonteCarloResult,
+    match_modes,
+    monte_carlo,
+    record_seed,
+)
 
 PAPER_SETTINGS = dict(n_samples=10_000, order=12, block_rows=15, past_block_rows=15, n_blocks=50)
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"

@@ -14,7 +14,7 @@ import importlib
 import os
 from pathlib import Path
 
-from ._common import RecordingFileError
+from .errors import RecordingFileError
 from .recording import Recording
 
 __all__ = ["Recording", "RecordingFileError", "load", "SUPPORTED_EXTENSIONS", "FORMATS",

@@ -11,17 +11,12 @@ from pathlib import Path
 
 import numpy as np
 
-from .recording import _check_fs
+from ..checks import check_boolean
+from .errors import RecordingFileError, fail
+from .recording import check_fs
 
-__all__ = ["RecordingFileError", "check_path", "reading", "fs_from_time", "snap_fs",
+__all__ = ["RecordingFileError", "fail", "check_path", "reading", "fs_from_time", "snap_fs",
            "pick_fs", "optional_import", "check_str_or_none", "parse_isolated"]
-
-
-class RecordingFileError(ValueError):
-    """A file could not be turned into a Recording (corrupt, truncated, empty, wrong layout...).
-
-    Subclass of :class:`ValueError`; the message always starts with the file path.
-    """
 
 
 def check_path(path, param: str = "path") -> Path:
@@ -38,11 +33,6 @@ def check_path(path, param: str = "path") -> Path:
     if p.stat().st_size == 0:
         raise RecordingFileError(f"{p}: file is empty (0 bytes)")
     return p
-
-
-def fail(path, message: str) -> RecordingFileError:
-    """Build (not raise) the standard error: ``"<path>: <message>"``."""
-    return RecordingFileError(f"{path}: {message}")
 
 
 @contextlib.contextmanager
@@ -71,9 +61,7 @@ def reading(path, what: str):
 def parse_isolated(isolate, func, path, what: str, *args, **kwargs):
     """``func(*args, **kwargs)``, in a child process when ``isolate`` (see ``_isolate``), with
     the time limit ``modaluq.io.PARSE_TIMEOUT`` plus one second per 50 MB of file."""
-    if not isinstance(isolate, bool):
-        raise TypeError(f"isolate must be True or False, got {isolate!r}")
-    if not isolate:
+    if not check_boolean("isolate", isolate):
         return func(*args, **kwargs)
     from . import _isolate
 
@@ -145,11 +133,11 @@ def fs_from_time(t, path, *, tolerance: float = 0.01, what: str = "time column")
 def pick_fs(fs_arg, fs_file, path, hint: str) -> float:
     """Explicit ``fs=`` wins; otherwise the value found in the file; otherwise an error."""
     if fs_arg is not None:
-        return _check_fs(fs_arg, str(path))
+        return check_fs(fs_arg, str(path))
     if fs_file is None:
         raise fail(path, f"sampling frequency unknown: {hint}; pass fs=")
     try:
-        return _check_fs(fs_file, str(path))
+        return check_fs(fs_file, str(path))
     except (TypeError, ValueError) as exc:
         raise fail(path, f"invalid sampling frequency stored in file: {exc}") from None
 
@@ -157,7 +145,7 @@ def pick_fs(fs_arg, fs_file, path, hint: str) -> float:
 def check_fs_arg(fs) -> None:
     """Validate a user-given fs early (TypeError/ValueError) so the message names ``fs``."""
     if fs is not None:
-        _check_fs(fs)
+        check_fs(fs)
 
 
 def optional_import(module: str, package: str, fmt: str):

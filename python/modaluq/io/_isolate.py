@@ -27,6 +27,8 @@ import threading
 import time
 from pathlib import Path
 
+from .errors import fail
+
 _PRELOAD = ("numpy", "scipy.io", "h5py", "modaluq.io.matlab", "modaluq.io.hdf5")
 _LEN = struct.Struct("<Q")
 
@@ -182,8 +184,6 @@ def run(func, path, what: str, *args, timeout: float, **kwargs):
     Exceptions raised by ``func`` are re-raised here. A crash, a non-zero exit or a run over
     ``timeout`` seconds raises ``RecordingFileError("<path>: the <what> parser ...")``.
     """
-    from ._common import fail
-
     ref = (func.__module__, func.__qualname__)
     req = pickle.dumps((ref, args, kwargs, float(timeout)), protocol=pickle.HIGHEST_PROTOCOL)
     with _LOCK:

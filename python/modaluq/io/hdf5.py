@@ -4,8 +4,18 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._common import (check_fs_arg, check_path, fail, fs_from_increment, fs_from_time,
-                      optional_import, parse_isolated, pick_fs, reading, str_list)
+from ._common import (
+    check_fs_arg,
+    check_path,
+    fail,
+    fs_from_increment,
+    fs_from_time,
+    optional_import,
+    parse_isolated,
+    pick_fs,
+    reading,
+    str_list,
+)
 from .recording import Recording
 
 __all__ = ["read_hdf5", "FS_ATTRIBUTE_NAMES"]

@@ -10,8 +10,17 @@ import zlib
 
 import numpy as np
 
-from ._common import (check_fs_arg, check_path, fail, fs_from_time, optional_import,
-                      parse_isolated, pick_fs, reading, str_list)
+from ._common import (
+    check_fs_arg,
+    check_path,
+    fail,
+    fs_from_time,
+    optional_import,
+    parse_isolated,
+    pick_fs,
+    reading,
+    str_list,
+)
 from .recording import Recording
 
 __all__ = ["read_matlab", "FS_VARIABLE_NAMES"]

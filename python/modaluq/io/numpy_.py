@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._common import (check_fs_arg, check_path, fail, pick_fs, reading, str_list)
+from ._common import check_fs_arg, check_path, fail, pick_fs, reading, str_list
 from .recording import Recording
 
 __all__ = ["read_numpy", "read_npy", "read_npz"]
@@ -76,7 +76,8 @@ def read_numpy(path, *, fs=None, inputs=None, names=None, units=None) -> Recordi
         raise fail(p, "not a NumPy file (no .npy magic '\\x93NUMPY' and not a .npz zip archive)")
 
     with reading(p, "NumPy .npz archive"):
-        with np.load(p, allow_pickle=False) as z:
+        # our own handle: np.load leaves its file open when the archive is corrupt
+        with open(p, "rb") as fh, np.load(fh, allow_pickle=False) as z:
             keys = list(z.files)
             if "y" not in keys:
                 raise fail(p, f".npz archive has no 'y' array (keys: {', '.join(keys) or 'none'})")

@@ -2,30 +2,29 @@
 
 from __future__ import annotations
 
-import math
 import numbers
 from dataclasses import dataclass
 from typing import Iterable, Sequence
 
 import numpy as np
 
+from ..checks import check_sampling_frequency
+
 __all__ = ["Recording"]
 
 
-def _check_fs(fs, source: str = "") -> float:
-    """Validate a sampling frequency: a finite real number > 0 (bool refused)."""
-    if isinstance(fs, (bool, np.bool_)) or not isinstance(fs, (numbers.Real, np.ndarray)):
-        raise TypeError(f"fs must be a real number (Hz), got {type(fs).__name__}")
+def check_fs(fs, source: str = "") -> float:
+    """A sampling frequency from a file or an argument: a finite real number > 0, or a one-element
+    array of one (a file stores it so); ``source`` (the file) prefixes a range error."""
     if isinstance(fs, np.ndarray):
         if fs.size != 1 or fs.dtype.kind not in "iuf":
-            raise TypeError(f"fs must be a real number (Hz), got an array of shape {fs.shape} "
+            raise TypeError(f"fs must be a real number in Hz; got an array of shape {fs.shape} "
                             f"and dtype {fs.dtype}")
         fs = fs.reshape(()).item()
-    fs = float(fs)
-    if not math.isfinite(fs) or fs <= 0.0:
-        where = f"{source}: " if source else ""
-        raise ValueError(f"{where}fs must be finite and > 0, got {fs!r}")
-    return fs
+    try:
+        return check_sampling_frequency(fs)
+    except ValueError as exc:
+        raise ValueError(f"{source}: {exc}" if source else str(exc)) from None
 
 
 def _as_str_tuple(values, n: int, what: str, default) -> tuple[str, ...]:
@@ -179,7 +178,7 @@ class Recording:
         if not isinstance(self.source, str):
             raise TypeError(f"source must be a string, got {type(self.source).__name__}")
         src = self.source
-        fs = _check_fs(self.fs, src)
+        fs = check_fs(self.fs, src)
         y = _as_samples(self.y, "y")
         if y.shape[0] < 1 or y.shape[1] < 1:
             raise ValueError(f"{src + ': ' if src else ''}y is empty (shape {y.shape})")
@@ -280,7 +279,7 @@ class Recording:
         """
         if not isinstance(source, str):
             raise TypeError(f"source must be a string, got {type(source).__name__}")
-        fs = _check_fs(fs, source)
+        fs = check_fs(fs, source)
         arr = _as_samples(samples)
         n_ch = arr.shape[1]
         if arr.shape[0] == 0 or n_ch == 0:

@@ -13,7 +13,7 @@ from collections.abc import Mapping
 import numpy as np
 
 from ._common import check_fs_arg, fs_from_time, snap_fs
-from .recording import Recording, _check_fs
+from .recording import Recording, check_fs
 
 __all__ = ["from_sep005", "to_sep005"]
 
@@ -100,7 +100,7 @@ def from_sep005(channels, *, fs=None, inputs=None, source: str = "SEP005",
         ch_fs = _get(ch, "fs")
         if ch_fs is not None:
             try:
-                ch_fs = _check_fs(ch_fs, source)
+                ch_fs = check_fs(ch_fs, source)
             except (TypeError, ValueError) as exc:
                 raise ValueError(f"{source}: channel {k} has an invalid 'fs': {exc}") from None
         elif fs is None:

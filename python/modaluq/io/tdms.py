@@ -7,8 +7,7 @@ import struct
 
 import numpy as np
 
-from ._common import (check_fs_arg, check_path, fail, fs_from_increment, fs_from_time,
-                      optional_import, pick_fs, reading)
+from ._common import check_fs_arg, check_path, fail, fs_from_increment, fs_from_time, optional_import, pick_fs, reading
 from .recording import Recording
 
 __all__ = ["read_tdms"]

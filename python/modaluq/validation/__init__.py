@@ -11,8 +11,8 @@ deviation of the estimates.  ``modaluq validate`` runs it from the command line.
 >>> mc.plot_histograms("histograms.png")                             # doctest: +SKIP
 """
 
-from .montecarlo import METHOD_LABELS, METHODS, MonteCarloResult, match_modes, monte_carlo, record_seed
-from .paper import PAPER_N_RECORDS, PAPER_N_SAMPLES, PAPER_ORDER, PAPER_TABLE_1, PAPER_TABLE_2
+from .montecarlo import MonteCarloResult, match_modes, monte_carlo, record_seed
+from .paper import METHOD_LABELS, METHODS, PAPER_N_RECORDS, PAPER_N_SAMPLES, PAPER_ORDER, PAPER_TABLE_1, PAPER_TABLE_2
 
 __all__ = [
     "METHODS",

@@ -29,15 +29,14 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .._core import NumericalError
-from ..identification import MAX_THREADS, ModalUQWarning, _boolean, _integer, _real, identify
+from ..checks import MAX_THREADS, check_boolean, check_integer, check_real
+from ..identification import identify
+from ..results import ModalUQWarning
 from ..simulate import simulate
+from .paper import METHOD_LABELS, METHODS
 
 __all__ = ["METHODS", "METHOD_LABELS", "MonteCarloResult", "match_modes", "monte_carlo", "record_seed"]
 
-#: The two identifications run on every record, in the order of the first array axis.
-METHODS = ("output-only", "input/output")
-#: Short labels of :data:`METHODS` (the paper's "OO" and "IO").
-METHOD_LABELS = {"output-only": "OO", "input/output": "IO"}
 
 # Records per task when chunk_size is not given: at most this many, and at least ~4 tasks per
 # process so that the progress bar moves and the processes finish together.
@@ -128,7 +127,7 @@ def match_modes(frequency_hz, true_frequency_hz, tolerance: float = 0.05) -> np.
 
 
 def _fraction(name, value) -> float:
-    return _real(name, value, low=0.0, high=1.0, low_open=True, high_open=True)
+    return check_real(name, value, low=0.0, high=1.0, low_open=True, high_open=True)
 
 
 @contextlib.contextmanager
@@ -355,7 +354,7 @@ class MonteCarloResult:
     close_singular_values: np.ndarray    #: (2, n_records) order cuts close singular values
     n_warnings: np.ndarray               #: (2, n_records) entries in Result.warnings
     settings: dict                       #: the run's settings
-    noise_coupled: np.ndarray | None = None        #: (2, n_records, n_modes) the pole's flag (uq-math §5.5)
+    noise_coupled: np.ndarray | None = None        #: (2, n_records, n_modes) the pole's flag (docs/uq-math.md §5.5)
     mode_shape: np.ndarray | None = None           #: (2, n_records, n_modes, n_outputs) normalised shapes
     mode_shape_std_real: np.ndarray | None = None  #: (2, n_records, n_modes, n_outputs)
     mode_shape_std_imag: np.ndarray | None = None  #: (2, n_records, n_modes, n_outputs)
@@ -527,7 +526,7 @@ class MonteCarloResult:
         """Write the per-record table (or, with ``summary=True``, the per-mode summary) as CSV."""
         import csv
 
-        cols = self.summary_columns() if _boolean("summary", summary) else self._columns()
+        cols = self.summary_columns() if check_boolean("summary", summary) else self._columns()
         names = list(cols)
         with open(path, "w", newline="") as fh:
             w = csv.writer(fh)
@@ -692,39 +691,39 @@ def monte_carlo(n_records: int = 200, *, n_samples: int = 10_000, order=12, bloc
     (2, 4, 6)
     >>> print(mc.report())                   # doctest: +SKIP
     """
-    n_records = _integer("n_records", n_records, minimum=1)
-    n_samples = _integer("n_samples", n_samples, minimum=1)
+    n_records = check_integer("n_records", n_records, minimum=1)
+    n_samples = check_integer("n_samples", n_samples, minimum=1)
     single = np.ndim(order) == 0
-    orders = tuple(sorted({_integer("order", n, minimum=1) for n in ([order] if single else order)}))
+    orders = tuple(sorted({check_integer("order", n, minimum=1) for n in ([order] if single else order)}))
     if not orders:
         raise ValueError("order must name at least one model order")
-    unknown_input_std = _real("unknown_input_std", unknown_input_std, low=0)
-    damping_ratio = _real("damping_ratio", damping_ratio, low=0, high=1, low_open=True, high_open=True)
+    unknown_input_std = check_real("unknown_input_std", unknown_input_std, low=0)
+    damping_ratio = check_real("damping_ratio", damping_ratio, low=0, high=1, low_open=True, high_open=True)
     simulation = {"unknown_input_std": unknown_input_std, "damping_ratio": damping_ratio,
-                  "n_dof": _integer("n_dof", n_dof, minimum=1),
-                  "input_dofs": tuple(_integer("input_dofs", d, minimum=0) for d in input_dofs)}
+                  "n_dof": check_integer("n_dof", n_dof, minimum=1),
+                  "input_dofs": tuple(check_integer("input_dofs", d, minimum=0) for d in input_dofs)}
     if output_dofs is not None:
-        simulation["output_dofs"] = tuple(_integer("output_dofs", d, minimum=0) for d in output_dofs)
-    block_rows = _integer("block_rows", block_rows, minimum=2)
+        simulation["output_dofs"] = tuple(check_integer("output_dofs", d, minimum=0) for d in output_dofs)
+    block_rows = check_integer("block_rows", block_rows, minimum=2)
     if past_block_rows is not None:
-        past_block_rows = _integer("past_block_rows", past_block_rows, minimum=1)
-    n_blocks = _integer("n_blocks", n_blocks, minimum=2)
-    seed = _integer("seed", seed, minimum=0)
-    processes = _available_cpus() if processes is None else _integer("processes", processes, minimum=1,
+        past_block_rows = check_integer("past_block_rows", past_block_rows, minimum=1)
+    n_blocks = check_integer("n_blocks", n_blocks, minimum=2)
+    seed = check_integer("seed", seed, minimum=0)
+    processes = _available_cpus() if processes is None else check_integer("processes", processes, minimum=1,
                                                                       maximum=MAX_THREADS)
-    progress = _boolean("progress", progress)
+    progress = check_boolean("progress", progress)
     match_tolerance = _fraction("match_tolerance", match_tolerance)
-    n_bootstrap = _integer("n_bootstrap", n_bootstrap, minimum=0)
+    n_bootstrap = check_integer("n_bootstrap", n_bootstrap, minimum=0)
     if chunk_size is not None:
-        chunk_size = _integer("chunk_size", chunk_size, minimum=1)
+        chunk_size = check_integer("chunk_size", chunk_size, minimum=1)
     if mp_context not in multiprocessing.get_all_start_methods():
         raise ValueError(f"mp_context must be one of {multiprocessing.get_all_start_methods()}; "
                          f"got {mp_context!r}")
 
     cfg = _Config(n_samples=n_samples, orders=orders, block_rows=block_rows, past_block_rows=past_block_rows,
                   n_blocks=n_blocks, seed=seed, match_tolerance=match_tolerance, simulation=simulation,
-                  freeze_noise=_boolean("freeze_noise", freeze_noise),
-                  noise_coupling_limit=_real("noise_coupling_limit", noise_coupling_limit, low=1))
+                  freeze_noise=check_boolean("freeze_noise", freeze_noise),
+                  noise_coupling_limit=check_real("noise_coupling_limit", noise_coupling_limit, low=1))
     processes = min(processes, n_records)
     if chunk_size is None:
         chunk_size = max(1, min(_MAX_CHUNK, math.ceil(n_records / (4 * processes))))

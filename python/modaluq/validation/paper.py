@@ -10,7 +10,7 @@ Units are the paper's, and are written into every name:
 * frequencies in Hz, their standard deviations in 10⁻² Hz (Table 2, "Hz · 10⁻²");
 * damping ratios and their standard deviations in **per mille** (10⁻³).  The paper's column
   headers say "Damping ratio (%)", but the true damping ratio of 2 % is printed as "20.0",
-  so the unit actually printed is ‰ (see ``uq-math.md`` §11.4).  Table 2's σ_ξ values are
+  so the unit actually printed is ‰ (see docs/uq-math.md §11.4).  Table 2's σ_ξ values are
   read in the same unit; the IO values (0.3–0.5 ‰) agree with our own σ_ξ in that unit and
   would be 10 times too large read as %.
 
@@ -22,12 +22,20 @@ are the ones printed in the paper, to the digits printed.
 from __future__ import annotations
 
 __all__ = [
+    "METHODS",
+    "METHOD_LABELS",
     "PAPER_N_RECORDS",
     "PAPER_N_SAMPLES",
     "PAPER_ORDER",
     "PAPER_TABLE_1",
     "PAPER_TABLE_2",
 ]
+
+#: The paper's two identifications, run on every record, in the order of the first array axis
+#: of the Monte Carlo results.
+METHODS = ("output-only", "input/output")
+#: Short labels of :data:`METHODS` (the paper's "OO" and "IO").
+METHOD_LABELS = {"output-only": "OO", "input/output": "IO"}
 
 #: Number of Monte Carlo records in the paper (§5.1).
 PAPER_N_RECORDS = 10_000

@@ -11,8 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .montecarlo import METHOD_LABELS, METHODS
-from .paper import PAPER_N_RECORDS, PAPER_N_SAMPLES, PAPER_ORDER, PAPER_TABLE_1, PAPER_TABLE_2
+from .paper import METHOD_LABELS, METHODS, PAPER_N_RECORDS, PAPER_N_SAMPLES, PAPER_ORDER, PAPER_TABLE_1, PAPER_TABLE_2
 
 __all__ = ["markdown_report", "plot_estimates", "plot_histograms"]
 
@@ -179,7 +178,7 @@ def _flag_table(res) -> list:
                            ("std_ratio_unflagged", f"mean σ / σ_MC ({sym}), unflagged"),
                            ("std_ratio_median_unflagged", f"median σ / σ_MC ({sym}), unflagged"),
                            ("rms_z_unflagged", f"RMS((est − mean)/σ) ({sym}), unflagged")):
-            rows.append((label, lambda m, a=getattr(res, f"{name}_{key}"): [_fmt(v, 2) for v in a[m]]))
+            rows.append((label, lambda m, a=getattr(res, f"{name}_{key}"): [_fmt(v, 2) for v in a[m]]))  # noqa: B008
     rows.append(("median σ / σ_MC (shape), unflagged",
                  lambda m: [_fmt(v, 2) for v in res.mode_shape_std_ratio_median[m]]))
     for m, method in enumerate(METHODS):
@@ -232,7 +231,8 @@ def markdown_report(res) -> str:
         f"- Identification: SSI-cov, output-only (OO) and input/output (IO) on the same record, model order "
         f"{s.get('order')}, p = {s.get('block_rows')} future and q = {q} past block rows, "
         f"{s.get('n_blocks')} blocks for the covariance; "
-        + (f"noise singular vectors frozen, poles flagged noise-coupled above ρ = {s.get('noise_coupling_limit', 20):g} "
+        + ("noise singular vectors frozen, poles flagged noise-coupled above "
+           f"ρ = {s.get('noise_coupling_limit', 20):g} "
            "(docs/uq-math.md §5.5)." if s.get("freeze_noise", True) else
            "plain first-order propagation (noise singular vectors free, `--no-freeze-noise`)."),
         f"- Run: {res.elapsed_s:.1f} s wall time, {res.processes} process(es); {res.machine}.",

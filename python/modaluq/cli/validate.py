@@ -1,6 +1,6 @@
 """``modaluq validate``: the paper's Monte Carlo study from the command line.
 
-Registered by :func:`register` from ``modaluq.cli``.  Prints the Markdown report on stdout,
+Prints the Markdown report on stdout,
 the progress bar on stderr and, with ``--out DIR``, writes ``report.md``, ``results.csv``
 (one row per record, method and mode), ``summary.csv`` (one row per method and mode),
 ``results.npz`` (everything, readable with ``MonteCarloResult.load``) and the histograms
@@ -14,7 +14,11 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-__all__ = ["register"]
+from ..checks import MAX_THREADS
+from ..validation import monte_carlo
+from .common import check_output_paths, integer_option, real_option
+
+__all__ = ["register", "run"]
 
 #: Files written into ``--out``.
 OUTPUT_FILES = ("report.md", "results.csv", "summary.csv", "results.npz", "histograms_std.png",
@@ -31,10 +35,7 @@ def _file_names(orders) -> list:
     return names
 
 
-def _validate(args) -> int:
-    from ..cli import check_output_paths
-    from .montecarlo import monte_carlo
-
+def run(args) -> int:
     orders = sorted(set(args.order))
     names = _file_names(orders)
     out = None
@@ -76,9 +77,6 @@ def register(subparsers) -> None:
     subparsers : argparse._SubParsersAction
         What ``ArgumentParser.add_subparsers`` returned.
     """
-    from ..cli import integer_option, real_option
-    from ..identification import MAX_THREADS
-
     v = subparsers.add_parser(
         "validate",
         help="Monte Carlo check of the analytic standard deviations (the paper's simulation study)",
@@ -120,4 +118,4 @@ def register(subparsers) -> None:
                    help="directory for report.md, results.csv, summary.csv, results.npz and the histogram PNGs")
     v.add_argument("--overwrite", action="store_true", help="replace the files of an earlier run in --out")
     v.add_argument("--no-progress", action="store_true", help="no progress bar")
-    v.set_defaults(func=_validate)
+    v.set_defaults(func=run)

@@ -6,6 +6,7 @@ count is), ``ValueError`` for a value out of range. Imports nothing from the pac
 
 from __future__ import annotations
 
+import importlib
 import math
 import numbers
 from typing import Iterable
@@ -66,14 +67,14 @@ def as_samples(x, name: str, *, allow_none: bool = False, n_channels: int | None
     return np.ascontiguousarray(arr, dtype=np.float64)
 
 
-def _boolean(name, value) -> bool:
+def check_boolean(name, value) -> bool:
     # bool("False") is True: a string or a number where a switch is expected is a mistake.
     if not isinstance(value, (bool, np.bool_)):
         raise TypeError(f"{name} must be True or False; got {value!r}")
     return bool(value)
 
 
-def _integer(name, value, *, minimum=None, maximum=MAX_COUNT):
+def check_integer(name, value, *, minimum=None, maximum=MAX_COUNT):
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Integral):
         raise TypeError(f"{name} must be an integer; got {value!r}")
     value = int(value)
@@ -84,18 +85,18 @@ def _integer(name, value, *, minimum=None, maximum=MAX_COUNT):
     return value
 
 
-def _integers(name, values, *, minimum=None, maximum=MAX_COUNT) -> list[int]:
+def check_integers(name, values, *, minimum=None, maximum=MAX_COUNT) -> list[int]:
     if isinstance(values, numbers.Integral) and not isinstance(values, (bool, np.bool_)):
         values = [values]
     if isinstance(values, (str, bytes)) or not isinstance(values, Iterable):
         raise TypeError(f"{name} must be an integer or an iterable of integers; got {values!r}")
-    out = [_integer(name, v, minimum=minimum, maximum=maximum) for v in values]
+    out = [check_integer(name, v, minimum=minimum, maximum=maximum) for v in values]
     if not out:
         raise ValueError(f"{name} must not be empty")
     return out
 
 
-def _real(name, value, *, low=None, high=None, low_open=False, high_open=False, allow_none=False):
+def check_real(name, value, *, low=None, high=None, low_open=False, high_open=False, allow_none=False):
     if value is None and allow_none:
         return None
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
@@ -110,10 +111,28 @@ def _real(name, value, *, low=None, high=None, low_open=False, high_open=False, 
     return value
 
 
-def _sampling_frequency(fs) -> float:
+def check_sampling_frequency(fs) -> float:
     if isinstance(fs, (bool, np.bool_)) or not isinstance(fs, numbers.Real):
         raise TypeError(f"fs must be a real number in Hz; got {fs!r}")
     fs = float(fs)
     if not np.isfinite(fs) or fs <= 0:
         raise ValueError(f"fs must be finite and > 0 Hz; got {fs}")
     return fs
+
+
+#: optional dependency -> the extra of modaluq that installs it
+EXTRAS = {"xarray": "export", "netCDF4": "export"}
+
+
+def require(module: str, purpose: str = "this"):
+    """Import an optional dependency, or raise an ImportError that says which extra installs it.
+
+    modaluq is installed from its source tree (it is not on the package index), hence the
+    ``pip install ".[extra]"`` in the message.
+    """
+    try:
+        return importlib.import_module(module)
+    except ImportError as exc:
+        extra = EXTRAS.get(module, "all")
+        raise ImportError(f"{purpose} needs {module}, which is not installed: run pip install \".[{extra}]\" "
+                          f"in the modaluq source directory (or pip install {module})") from exc

@@ -1,0 +1,217 @@
+"""Automatic mode selection: the stable poles of a diagram grouped into physical modes.
+
+:func:`select_modes` groups the stable poles by agglomerative hierarchical clustering (average
+linkage) on the distance ``|f_i - f_j| / max(f_i, f_j) + (1 - MAC_ij)``, cut at
+``distance_threshold`` (:class:`~modaluq.ClusteringSettings`); clusters with fewer than
+``min_cluster_size`` members, or whose frequency is less certain than the half-power bandwidth
+of the peak they claim, are dropped (and listed with the reason), and each remaining cluster is
+reported at one representative pole, with the median analytic standard deviation of its
+reliable poles next to the spread of its members.
+
+The clustering runs in the C++ core (``cpp/include/modaluq/selection.hpp``); this module
+translates its result into :class:`SelectedModes`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from . import _core
+from .settings import ClusteringSettings
+from .stabilization import Diagram
+
+__all__ = ["SelectedModes", "select_modes"]
+
+
+@dataclass(frozen=True, repr=False)
+class SelectedModes:
+    """Physical modes chosen automatically from a :class:`Diagram`, sorted by frequency.
+
+    Each mode is one cluster of poles. Its ``frequency_hz``, ``damping_ratio``, ``mode_shape``
+    and their ``*_std`` are those of one **representative** pole (analytic, delta-method σ at
+    ``representative_order``); the ``*_spread`` fields are the sample standard deviations
+    (ddof=1) across the cluster's members, a measure of the order-to-order scatter shown beside
+    the analytic σ (0 for a single member).
+    """
+
+    frequency_hz: np.ndarray           #: (n_modes,) Hz
+    damping_ratio: np.ndarray          #: (n_modes,) fraction
+    mode_shape: np.ndarray             #: (n_outputs, n_modes) complex, largest component 1
+    frequency_std: np.ndarray          #: (n_modes,) Hz, analytic (NaN without uncertainty)
+    damping_std: np.ndarray            #: (n_modes,) fraction, analytic
+    mode_shape_std_real: np.ndarray    #: (n_outputs, n_modes)
+    mode_shape_std_imag: np.ndarray    #: (n_outputs, n_modes)
+    frequency_spread: np.ndarray       #: (n_modes,) Hz, std across the cluster
+    damping_spread: np.ndarray         #: (n_modes,) fraction, std across the cluster
+    mode_shape_spread_real: np.ndarray  #: (n_outputs, n_modes), std across the cluster
+    mode_shape_spread_imag: np.ndarray  #: (n_outputs, n_modes)
+    min_mac: np.ndarray                #: (n_modes,) smallest MAC between representative and a member
+    representative_order: np.ndarray   #: (n_modes,) model order of the representative pole
+    representative_pole: np.ndarray    #: (n_modes,) index of the representative in the diagram
+    n_poles: np.ndarray                #: (n_modes,) members of the cluster
+    order_min: np.ndarray              #: (n_modes,) lowest order in the cluster
+    order_max: np.ndarray              #: (n_modes,) highest order in the cluster
+    members: tuple                     #: per mode, the diagram indices of its poles
+    #: (diagram.n_poles,) index (from 0, into these arrays) of each pole's mode, -1 if none;
+    #: the mode's number in tables and exports is this + 1
+    mode_of_pole: np.ndarray
+    dropped_frequency_hz: np.ndarray   #: median frequency of each dropped cluster, Hz
+    dropped_n_poles: np.ndarray        #: size of each dropped cluster
+    min_cluster_size: int              #: the size threshold actually applied (the smallest, per cluster)
+    output_names: tuple
+    settings: ClusteringSettings = field(default_factory=ClusteringSettings)
+    has_uncertainty: bool = True
+    dropped_reason: tuple = ()         #: why each cluster was dropped, in words
+    #: (n_modes,) median σ_f / (f ξ) over the cluster (NaN without uncertainty)
+    frequency_std_per_bandwidth: np.ndarray = field(default_factory=lambda: np.zeros(0))
+
+    @property
+    def n_modes(self) -> int:
+        return int(self.frequency_hz.size)
+
+    def __len__(self) -> int:
+        return self.n_modes
+
+    def to_dataframe(self):
+        """One row per mode, numbered from 1 (the index ``mode``, as in every table, plot and
+        export): f, σ_f, spread, ξ, σ_ξ, spread, cluster size and orders, and the shape per
+        channel in columns ``mode_shape_<channel>_real`` ...."""
+        import pandas as pd
+
+        data = {
+            "frequency_hz": self.frequency_hz, "frequency_std": self.frequency_std,
+            "frequency_spread": self.frequency_spread,
+            "damping_ratio": self.damping_ratio, "damping_std": self.damping_std,
+            "damping_spread": self.damping_spread,
+            "representative_order": self.representative_order, "n_poles": self.n_poles,
+            "order_min": self.order_min, "order_max": self.order_max, "min_mac": self.min_mac,
+        }
+        for k, name in enumerate(self.output_names):
+            data[f"mode_shape_{name}_real"] = self.mode_shape[k].real
+            data[f"mode_shape_{name}_imag"] = self.mode_shape[k].imag
+            data[f"mode_shape_{name}_std_real"] = self.mode_shape_std_real[k]
+            data[f"mode_shape_{name}_std_imag"] = self.mode_shape_std_imag[k]
+        return pd.DataFrame(data, index=pd.RangeIndex(1, self.n_modes + 1, name="mode"))
+
+    def to_dict(self) -> dict:
+        """Plain-Python (JSON-ready) description (see :func:`modaluq.export.selected_modes_to_dict`)."""
+        from .export import selected_modes_to_dict
+
+        return selected_modes_to_dict(self)
+
+    def table(self) -> str:
+        """Plain-text table: f and ξ with their analytic σ and the spread across the cluster."""
+        head = (f"{'mode':>4}  {'f [Hz]':>9}  {'std f':>8}  {'spread f':>8}  {'xi [%]':>7}  "
+                f"{'std xi':>7}  {'spread xi':>9}  {'order':>5}  {'poles':>5}")
+        def cell(x, width, digits):
+            return f"{x:>{width}.{digits}f}" if np.isfinite(x) else f"{'-':>{width}}"
+
+        lines = [head]
+        for i in range(self.n_modes):
+            lines.append(
+                f"{i + 1:>4}  {self.frequency_hz[i]:>9.4f}  {cell(self.frequency_std[i], 8, 4)}  "
+                f"{cell(self.frequency_spread[i], 8, 4)}  {100 * self.damping_ratio[i]:>7.3f}  "
+                f"{cell(100 * self.damping_std[i], 7, 3)}  {cell(100 * self.damping_spread[i], 9, 3)}  "
+                f"{int(self.representative_order[i]):>5}  {int(self.n_poles[i]):>5}")
+        return "\n".join(lines)
+
+    def __str__(self) -> str:
+        s = f"{self.n_modes} modes (std: analytic, median over the cluster; spread: across the cluster)\n"
+        s += self.table()
+        if self.dropped_n_poles.size:
+            # counted by the reason each carries (selection.hpp words them)
+            too_small = sum(1 for r in self.dropped_reason if "fewer than" in r)
+            too_uncertain = sum(1 for r in self.dropped_reason if "half-power bandwidth" in r)
+            twins = sum(1 for r in self.dropped_reason if r.startswith("a twin of"))
+            parts = []
+            if too_small:
+                parts.append(f"{too_small} with fewer than {self.min_cluster_size} poles")
+            if too_uncertain:
+                parts.append(f"{too_uncertain} whose frequency std exceeds the peak's half-power bandwidth")
+            if twins:
+                parts.append(f"{twins} twin{'' if twins == 1 else 's'} of a selected mode")
+            s += f"\n{self.dropped_n_poles.size} cluster(s) dropped: " + ", ".join(parts)
+        return s
+
+    def __repr__(self) -> str:
+        f = np.array2string(self.frequency_hz, precision=3, separator=", ")
+        return f"SelectedModes(n_modes={self.n_modes}, frequency_hz={f})"
+
+    def plot(self, fig=None, *, channel_positions=None):
+        """Mode shapes with ±σ error bars; see :func:`modaluq.plot.plot_mode_shapes`. Returns the Figure."""
+        from .plot import plot_mode_shapes
+
+        return plot_mode_shapes(self, fig=fig, channel_positions=channel_positions)
+
+
+def select_modes(diagram: Diagram, settings: ClusteringSettings | None = None, **kwargs) -> SelectedModes:
+    """Group the stable poles of a diagram into physical modes (deterministic).
+
+    Method:
+
+    1. take the poles whose status is in ``settings.statuses`` (default: ``STABLE``);
+    2. distance ``d_ij = |f_i - f_j| / max(f_i, f_j) + (1 - MAC_ij)`` between every pair;
+    3. agglomerative clustering (``settings.linkage``) cut at ``settings.distance_threshold``:
+       the core's nearest-neighbour chain, equal to :func:`scipy.cluster.hierarchy.linkage` +
+       :func:`~scipy.cluster.hierarchy.fcluster` with criterion ``"distance"``;
+    4. a physical mode appears once per order: when a cluster holds several poles of one order
+       (a mode doubled by a spurious twin), keep the one nearest to the cluster's median
+       frequency. (Penalising same-order pairs in the distance instead would split such a mode
+       into two clusters.)
+    5. drop clusters with fewer than ``min_cluster_size`` members, and clusters whose median
+       ``σ_f / (f ξ)`` exceeds ``max_frequency_std_per_bandwidth`` (default 1: the frequency is
+       less certain than the half-power bandwidth of the peak; spurious poles, whose σ the noise
+       directions inflate, have 2–5, structural modes 0.05–0.7 on the shared records); each is
+       reported in ``dropped_frequency_hz`` / ``dropped_n_poles`` / ``dropped_reason``;
+    6. the representative of a cluster is its member nearest to the cluster's median frequency
+       among the members at orders that do **not** cut close singular values (whose σ are
+       meaningful), or among all members when every member's order does; ties go to the higher
+       order. Its frequency, damping ratio and shape are reported; the ``frequency_std`` and
+       ``damping_std`` reported are the **median over the cluster's reliable poles** (not at
+       a close cut, not noise-coupled), so that they do not depend on the order the mode is
+       read at; the ``*_spread`` beside them is how much the estimate moves with the order.
+
+    Noise-coupled poles (``Diagram.noise_coupled``, docs/uq-math.md §5.5) are clustered (a weak
+    physical mode below the noise floor has them at every order) but never give the σ.
+
+    Parameters
+    ----------
+    diagram : Diagram
+        From :func:`stabilization_diagram`.
+    settings : ClusteringSettings, optional
+        Or its fields as keyword arguments (``distance_threshold=0.03`` ...).
+
+    Returns
+    -------
+    SelectedModes
+        Sorted by frequency; empty when no pole qualifies.
+    """
+    if not isinstance(diagram, Diagram):
+        raise TypeError(f"diagram must be a Diagram (from stabilization_diagram); got {type(diagram).__name__}")
+    if settings is None:
+        settings = ClusteringSettings(**kwargs)
+    elif kwargs:
+        raise TypeError("pass either settings= or its fields as keyword arguments, not both")
+    elif not isinstance(settings, ClusteringSettings):
+        raise TypeError(f"settings must be a ClusteringSettings; got {type(settings).__name__}")
+
+    sel = _core.select_modes(diagram.to_core(), settings.to_core())
+    return SelectedModes(
+        frequency_hz=sel.frequency_hz, damping_ratio=sel.damping_ratio, mode_shape=sel.mode_shape,
+        frequency_std=sel.frequency_std, damping_std=sel.damping_std,
+        mode_shape_std_real=sel.mode_shape_std_real, mode_shape_std_imag=sel.mode_shape_std_imag,
+        frequency_spread=sel.frequency_spread, damping_spread=sel.damping_spread,
+        mode_shape_spread_real=sel.mode_shape_spread_real, mode_shape_spread_imag=sel.mode_shape_spread_imag,
+        min_mac=sel.min_mac, representative_order=np.asarray(sel.representative_order, np.int64),
+        representative_pole=np.asarray(sel.representative_pole, np.int64),
+        n_poles=np.asarray(sel.n_poles, np.int64), order_min=np.asarray(sel.order_min, np.int64),
+        order_max=np.asarray(sel.order_max, np.int64),
+        members=tuple(np.asarray(m, dtype=np.int64) for m in sel.members),
+        mode_of_pole=np.asarray(sel.mode_of_pole, np.int64),
+        dropped_frequency_hz=sel.dropped_frequency_hz, dropped_n_poles=np.asarray(sel.dropped_n_poles, np.int64),
+        min_cluster_size=int(sel.min_cluster_size), output_names=diagram.output_names, settings=settings,
+        has_uncertainty=diagram.has_uncertainty, dropped_reason=tuple(sel.dropped_reason),
+        frequency_std_per_bandwidth=sel.frequency_std_per_bandwidth,
+    )

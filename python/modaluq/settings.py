@@ -1,0 +1,421 @@
+"""Settings: what an analysis is asked to do, as frozen dataclasses mapped onto the core's options.
+
+- :class:`Settings`: the identification (horizons, orders, blocks, uncertainty) and the
+  preprocessing of the record (band, window, decimation, filters): every keyword of
+  :func:`modaluq.identify`, in one object that checks itself and can be reused, compared and
+  saved (``to_dict``);
+- :class:`StabilityCriteria`: how the stabilization diagram judges each pole;
+- :class:`ClusteringSettings`: how the automatic selection groups stable poles into modes;
+- :class:`PoleStatus`: the verdict on one pole.
+
+Every check names the field at fault (``TypeError`` for the wrong kind of value, ``ValueError``
+for a value out of range), as :mod:`modaluq.checks` does everywhere.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import enum
+from dataclasses import dataclass, fields
+from typing import Optional, Tuple
+
+from . import _core
+from .checks import MAX_THREADS, check_boolean, check_integer, check_integers, check_real, check_sampling_frequency
+
+__all__ = ["ClusteringSettings", "PoleStatus", "Settings", "StabilityCriteria", "CORE_OF_STATUS", "STATUS_OF_CORE"]
+
+
+class PoleStatus(str, enum.Enum):
+    """Outcome of the stability checks for one pole (a ``str``, so it prints and exports as text).
+
+    STABLE
+        Passes its own checks and every check against its match at the previous order.
+    STABLE_FREQUENCY
+        Frequency stable (relative change and, with uncertainty, the σ test), but the damping
+        change or the MAC fails.
+    UNSTABLE
+        Lowest order, no acceptable pole at the previous order, or the frequency test fails.
+    REJECTED
+        Physically implausible (damping out of range) or too uncertain (σ_f / f too large);
+        never compared and never selected.
+    """
+
+    STABLE = "stable"
+    STABLE_FREQUENCY = "stable_frequency"
+    UNSTABLE = "unstable"
+    REJECTED = "rejected"
+
+    def __str__(self) -> str:  # "stable", not "PoleStatus.STABLE"
+        return self.value
+
+
+#: the core's status (stabilization.hpp) -> PoleStatus, and back
+STATUS_OF_CORE = {
+    _core.PoleStatus.stable: PoleStatus.STABLE, _core.PoleStatus.stable_frequency: PoleStatus.STABLE_FREQUENCY,
+    _core.PoleStatus.unstable: PoleStatus.UNSTABLE, _core.PoleStatus.rejected: PoleStatus.REJECTED,
+}
+CORE_OF_STATUS = {v: k for k, v in STATUS_OF_CORE.items()}
+
+
+
+
+# --------------------------------------------------------------------------- identification
+
+
+#: Fields of :class:`Settings` that only change the samples before identification (preprocess.py).
+PREPROCESSING_FIELDS = ("frequency_range", "start", "stop", "decimate", "detrend", "highpass")
+
+
+@dataclass(frozen=True)
+class Settings:
+    """Every setting of one identification (see :func:`modaluq.identify` for what each does).
+
+    ``block_rows``, ``orders`` and ``n_blocks`` left at ``None`` are chosen from the data
+    (:mod:`modaluq.auto_settings`); :meth:`to_core` maps the rest one to one onto the core's
+    ``IdentifyOptions``. Checked when made, so a wrong value fails where it is written.
+
+    >>> s = Settings(block_rows=20, orders=range(2, 41, 2))
+    >>> s.orders[:3], s.n_blocks
+    ((2, 4, 6), None)
+    >>> s.replace(n_blocks=30).n_blocks
+    30
+    """
+
+    block_rows: Optional[int] = None                 #: future block rows p (>= 2)
+    past_block_rows: Optional[int] = None            #: past block rows q (default p)
+    orders: Optional[Tuple[int, ...]] = None         #: model orders, ascending, distinct
+    n_blocks: Optional[int] = None                   #: blocks for the covariance of the covariances
+    references: Optional[Tuple[int, ...]] = None     #: output indices of the past (default all)
+    uncertainty: bool = True                         #: propagate the covariance to every parameter
+    demean: bool = True                              #: remove each channel's mean
+    input_rcond: float = 1e-10                       #: relative cut of the input covariance's pseudo-inverse
+    threads: int = 1                                 #: threads of the core (the result does not depend on it)
+    freeze_noise: bool = True                        #: hold the noise directions fixed (docs/uq-math.md §5.5)
+    noise_coupling_limit: float = 20.0               #: σ shrink factor that flags a noise-coupled pole
+    frequency_range: Optional[Tuple[float, float]] = None  #: band of interest (f_low, f_high), Hz
+    start: Optional[float] = None                    #: window start, s from the first sample
+    stop: Optional[float] = None                     #: window end, s
+    decimate: Optional[int] = None                   #: integer decimation factor
+    detrend: Optional[str] = None                    #: "constant", "linear" or None
+    highpass: Optional[float] = None                 #: high-pass corner, Hz
+
+    def __post_init__(self):
+        def put(name, value):
+            object.__setattr__(self, name, value)  # frozen: normalise once, here
+
+        if self.block_rows is not None:
+            put("block_rows", check_integer("block_rows", self.block_rows, minimum=2))
+        if self.past_block_rows is not None:
+            put("past_block_rows", check_integer("past_block_rows", self.past_block_rows, minimum=1))
+        if self.orders is not None:
+            put("orders", tuple(sorted(set(check_integers("orders", self.orders, minimum=1)))))
+        if self.n_blocks is not None:
+            put("n_blocks", check_integer("n_blocks", self.n_blocks))
+        if self.references is not None:
+            put("references", tuple(check_integers("references", self.references, minimum=0)))
+        for name in ("uncertainty", "demean", "freeze_noise"):
+            put(name, check_boolean(name, getattr(self, name)))
+        put("input_rcond", check_real("input_rcond", self.input_rcond, low=0, high=1, high_open=True))
+        put("threads", check_integer("threads", self.threads, minimum=1, maximum=MAX_THREADS))
+        put("noise_coupling_limit", check_real("noise_coupling_limit", self.noise_coupling_limit, low=1))
+        if isinstance(self.frequency_range, list):  # checked against fs by preprocess()
+            put("frequency_range", tuple(self.frequency_range))
+
+    @property
+    def preprocessing(self) -> dict:
+        """The preprocessing fields that are set (keyword arguments of :func:`modaluq.preprocess.preprocess`)."""
+        return {k: getattr(self, k) for k in PREPROCESSING_FIELDS if getattr(self, k) is not None}
+
+    def replace(self, **changes) -> "Settings":
+        """A copy with ``changes`` (checked like the original)."""
+        return dataclasses.replace(self, **changes)
+
+    def to_dict(self) -> dict:
+        return {f.name: (list(v) if isinstance(v, tuple) else v)
+                for f in fields(self) for v in (getattr(self, f.name),)}
+
+    def layout(self, n_outputs: int, n_inputs: int = 0) -> "_core.HankelLayout":
+        """The core's Hankel layout of these horizons for ``n_outputs`` / ``n_inputs`` channels."""
+        if self.block_rows is None:
+            raise ValueError("block_rows is not set (Settings.layout needs the horizons)")
+        lay = _core.HankelLayout()
+        lay.n_outputs = check_integer("n_outputs", n_outputs, minimum=1)
+        lay.n_inputs = check_integer("n_inputs", n_inputs, minimum=0)
+        lay.block_rows = self.block_rows
+        lay.past_block_rows = self.past_block_rows or 0
+        lay.references = list(self.references or ())
+        return lay
+
+    def max_order(self, n_outputs: int) -> int:
+        """Largest model order these horizons support, ``min((p-1) l, q r)`` (the core's rule)."""
+        return int(self.layout(n_outputs).max_order)
+
+    def to_core(self, fs: float) -> "_core.IdentifyOptions":
+        """The core's ``IdentifyOptions`` (``block_rows``, ``orders`` and ``n_blocks`` must be set)."""
+        missing = [k for k in ("block_rows", "orders", "n_blocks") if getattr(self, k) is None]
+        if missing:
+            raise ValueError(f"{', '.join(missing)} not set: choose them (auto_settings.choose_settings) first")
+        o = _core.IdentifyOptions()
+        o.fs = check_sampling_frequency(fs)
+        o.block_rows = self.block_rows
+        o.past_block_rows = self.past_block_rows or 0
+        o.orders = list(self.orders)
+        o.n_blocks = self.n_blocks
+        o.references = list(self.references or ())
+        o.uncertainty = self.uncertainty
+        o.demean = self.demean
+        o.input_rcond = self.input_rcond
+        o.threads = self.threads
+        o.freeze_noise = self.freeze_noise
+        o.noise_coupling_limit = self.noise_coupling_limit
+        o.validate()
+        return o
+
+    def record(self, fs: float, n_outputs: int) -> dict:
+        """What ``Result.settings`` keeps of the identification (defaults resolved)."""
+        return {
+            "fs": fs,
+            "block_rows": self.block_rows,
+            "past_block_rows": self.past_block_rows or self.block_rows,
+            "orders": list(self.orders),
+            "n_blocks": self.n_blocks if self.uncertainty else None,
+            "references": list(self.references or ()) or list(range(n_outputs)),
+            "uncertainty": self.uncertainty,
+            "demean": self.demean,
+            "input_rcond": self.input_rcond,
+            "threads": self.threads,
+            "freeze_noise": self.freeze_noise,
+            "noise_coupling_limit": self.noise_coupling_limit,
+        }
+
+
+# --------------------------------------------------------------------------- diagram and selection
+
+
+@dataclass(frozen=True)
+class StabilityCriteria:
+    """Thresholds of the stabilization diagram (all dimensionless fractions unless stated).
+
+    A pole is first checked on its own; failing any of these makes it ``REJECTED``:
+
+    - ``damping_ratio < min_damping_ratio`` (default 0: negative damping is unstable, not a
+      structural mode) or ``damping_ratio > max_damping_ratio`` (default 0.20 = 20 %: lightly
+      damped structures rarely exceed a few percent; heavily damped poles are usually noise);
+    - ``frequency_std / frequency_hz > max_frequency_cov`` (default 0.05 = 5 %, a loose backstop:
+      whether a column's σ is too large is judged by the selection against the bandwidth f ξ
+      of its peak, :class:`ClusteringSettings`. The earlier 2 % cut the columns of well-damped
+      modes into pieces; on Painter Street it hid the 10.8 Hz column). Skipped when the result
+      carries no uncertainty; a pole whose σ is not finite is rejected.
+
+    The other poles are compared with the pole of the previous identified order that minimises
+    ``|Δf| / f_prev + (1 - MAC)`` among that order's non-rejected poles within ``match_window``
+    in frequency (default 0.05 = 5 %); with none there, the pole is ``UNSTABLE`` ("no match").
+    It is
+
+    - frequency stable when ``|Δf| / f_prev <= max_frequency_change`` (default 0.01 = 1 %) **and**,
+      with uncertainty, ``|Δf| <= frequency_std_factor * sqrt(σ_f² + σ_f,prev²)`` (default
+      k = 2: a change larger than twice the combined standard deviation is statistically
+      significant at about 95 % even if the two estimates were independent, and estimates at
+      consecutive orders from the same data are positively correlated, so the test is
+      conservative towards keeping a pole). ``frequency_std_factor=None`` switches it off;
+    - damping stable, with uncertainty, when ``|Δξ| <= damping_std_factor * sqrt(σ_ξ² + σ_ξ,prev²)``
+      (default k = 2) and ``|Δξ| / |ξ_prev| <= max_damping_change_with_std`` (default 0.5, a
+      loose backstop): a damping ratio with σ_ξ = 50 % of ξ moves by more than 10 % between
+      orders on noise alone, so a fixed relative bound breaks the columns of physical modes
+      into pieces (on the shared records the σ test keeps 10–60 % more poles per mode and adds
+      no spurious mode; the clusters of spurious poles it lets through are dropped by their σ,
+      see :class:`ClusteringSettings`). Without uncertainty, or with ``damping_std_factor=None``,
+      ``|Δξ| / |ξ_prev| <= max_damping_change`` (default 0.10 = 10 %; the 5 % often used makes
+      physical poles flicker);
+    - shape stable when ``MAC >= min_mac`` (default 0.98).
+
+    ``STABLE`` needs all three; frequency alone gives ``STABLE_FREQUENCY``.
+
+    Parameters
+    ----------
+    max_frequency_change : float
+        Largest relative frequency change between consecutive orders (fraction).
+    max_damping_change : float
+        Largest relative damping-ratio change between consecutive orders (fraction).
+    min_mac : float
+        Smallest MAC between the shapes at consecutive orders (0..1).
+    frequency_std_factor : float or None
+        k of the σ test on the frequency change (dimensionless), or None to skip it.
+    max_frequency_cov : float or None
+        Largest coefficient of variation σ_f / f (fraction), or None to skip it.
+    min_damping_ratio, max_damping_ratio : float
+        Accepted range of the damping ratio (fraction, 0.02 = 2 %).
+    damping_std_factor : float or None
+        k of the σ test on the damping change (default 2), or None for the relative test.
+    max_damping_change_with_std : float
+        Backstop on the relative damping change when the σ test is used (fraction).
+    match_window : float
+        Largest relative frequency distance to a pole of the previous order that can be its match.
+    """
+
+    max_frequency_change: float = 0.01
+    max_damping_change: float = 0.10
+    min_mac: float = 0.98
+    frequency_std_factor: float | None = 2.0
+    max_frequency_cov: float | None = 0.05
+    min_damping_ratio: float = 0.0
+    max_damping_ratio: float = 0.20
+    damping_std_factor: float | None = 2.0
+    max_damping_change_with_std: float = 0.5
+    match_window: float = 0.05
+
+    def __post_init__(self):
+        check_real("max_frequency_change", self.max_frequency_change, low=0)
+        check_real("max_damping_change", self.max_damping_change, low=0)
+        check_real("min_mac", self.min_mac, low=0, high=1)
+        check_real("frequency_std_factor", self.frequency_std_factor, low=0, low_open=True, allow_none=True)
+        check_real("max_frequency_cov", self.max_frequency_cov, low=0, low_open=True, allow_none=True)
+        check_real("damping_std_factor", self.damping_std_factor, low=0, low_open=True, allow_none=True)
+        check_real("max_damping_change_with_std", self.max_damping_change_with_std, low=0)
+        check_real("match_window", self.match_window, low=0, low_open=True)
+        lo = check_real("min_damping_ratio", self.min_damping_ratio, low=-1, high=1)
+        hi = check_real("max_damping_ratio", self.max_damping_ratio, low=-1, high=1)
+        if hi <= lo:
+            raise ValueError(f"max_damping_ratio must be > min_damping_ratio ({lo}); got {hi}")
+
+    def to_dict(self) -> dict:
+        return {f.name: getattr(self, f.name) for f in fields(self)}
+
+    def to_core(self):
+        c = _core.StabilityCriteria()
+        for f in fields(self):
+            value = getattr(self, f.name)
+            setattr(c, f.name, None if value is None else float(value))
+        return c
+
+
+@dataclass(frozen=True)
+class ClusteringSettings:
+    """How :func:`select_modes` groups poles into modes.
+
+    Parameters
+    ----------
+    distance_threshold : float
+        Cut height of the dendrogram on the distance ``|f_i - f_j| / max(f_i, f_j) + (1 - MAC_ij)``
+        (dimensionless; default 0.02, e.g. 1 % in frequency plus MAC 0.99). Poles of one cluster
+        are on average closer than this to each other (average linkage).
+    min_cluster_size : int or None
+        Clusters with fewer members (after keeping one pole per order) are dropped. Default
+        (None): ``min_cluster_fraction`` of the identified orders from the lowest order that holds
+        a clustered pole upwards, rounded up, and at least 3.
+    min_cluster_fraction : float
+        Used when ``min_cluster_size`` is None (default 0.25): a physical mode should be stable
+        over at least a quarter of the orders that can hold it. Spurious poles seldom stay
+        stable over more than a few consecutive orders, while a physical mode can lose
+        stability over a range of orders where a spurious pole splits it (seen with few sensors
+        at orders far above the true one), so a higher fraction drops real modes.
+    per_cluster_min_size : bool
+        With ``min_cluster_size=None``, count the orders from each cluster's own lowest order
+        (True: a mode that first appears at a high order needs fewer poles) instead of from the
+        lowest order of any clustered pole (False, default).
+    max_frequency_std_per_bandwidth : float or None
+        Clusters whose median ``σ_f / (f ξ)`` exceeds this are dropped (default 1): the frequency
+        is then less certain than the half-power half-bandwidth ``f ξ`` of the peak the pole
+        claims. A structural mode identified from a record of ``T`` seconds has about
+        ``1 / sqrt(2π f T ξ)`` (0.05–0.4 on the shared records), while spurious poles, whose σ
+        the noise directions inflate, have 2–5. None switches it off; skipped without uncertainty.
+    merge_fragments : bool
+        Join clusters that are pieces of one mode (default True; skipped without uncertainty):
+        median frequencies within ``fragment_std_factor`` (default 3) combined σ_f, shapes with
+        MAC >= ``fragment_min_mac`` (default 0.8), and at most ``fragment_max_shared`` (default
+        0.25) of the smaller piece's orders in common. A mode has one pole per order, so two
+        clusters present at the same orders are two modes, however close (a fore-aft/side-side
+        pair of a tower); pieces arise where a mode's shape varies with the order (close modes,
+        few sensors) and the frequency-and-MAC distance splits its column into parts each too
+        small to be selected (the wind turbine's 1.6 Hz column, docs/settings.md).
+    fragment_std_factor, fragment_min_mac, fragment_max_shared : float
+        See ``merge_fragments``.
+    drop_doublets : bool
+        Drop the later of two selected clusters within ``doublet_window`` (default 0.05 = 5 %)
+        in frequency whose shapes have MAC >= ``doublet_min_mac`` (default 0.8). Above the true
+        order one mode is often fitted by a pair of poles with the same shape, the twin a few
+        per cent away and often lightly damped; the twin appears at higher orders than the mode.
+        "Later": the higher first order, then fewer poles. On the paper's chain, output-only,
+        this removes the twins selected in 5 of 12 records (docs/settings.md);
+        two physical modes that close and that alike in shape are not told apart by the
+        sensors anyway. The dropped twin is listed with its reason.
+    doublet_window, doublet_min_mac : float
+        See ``drop_doublets``.
+    statuses : tuple of PoleStatus
+        Which poles are clustered (default only ``STABLE``).
+    linkage : str
+        Linkage method (the clustering is the core's, selection.hpp; it equals
+        :func:`scipy.cluster.hierarchy.linkage` + ``fcluster``): default ``"average"``;
+        ``"single"`` chains neighbouring poles, ``"complete"`` is stricter, ``"weighted"`` is WPGMA.
+    """
+
+    distance_threshold: float = 0.02
+    min_cluster_size: int | None = None
+    min_cluster_fraction: float = 0.25
+    per_cluster_min_size: bool = False
+    max_frequency_std_per_bandwidth: float | None = 1.0
+    merge_fragments: bool = True
+    drop_doublets: bool = True
+    doublet_window: float = 0.05
+    doublet_min_mac: float = 0.8
+    fragment_std_factor: float = 3.0
+    fragment_min_mac: float = 0.8
+    fragment_max_shared: float = 0.25
+    statuses: tuple = (PoleStatus.STABLE,)
+    linkage: str = "average"
+
+    def __post_init__(self):
+        check_real("distance_threshold", self.distance_threshold, low=0, low_open=True)
+        if self.min_cluster_size is not None:
+            check_integer("min_cluster_size", self.min_cluster_size, minimum=1)
+        check_real("min_cluster_fraction", self.min_cluster_fraction, low=0, high=1, low_open=True)
+        check_real("max_frequency_std_per_bandwidth", self.max_frequency_std_per_bandwidth, low=0, low_open=True,
+              allow_none=True)
+        for name in ("per_cluster_min_size", "merge_fragments", "drop_doublets"):
+            check_boolean(name, getattr(self, name))
+        check_real("doublet_window", self.doublet_window, low=0)
+        check_real("doublet_min_mac", self.doublet_min_mac, low=0, high=1)
+        check_real("fragment_std_factor", self.fragment_std_factor, low=0)
+        check_real("fragment_min_mac", self.fragment_min_mac, low=0, high=1)
+        check_real("fragment_max_shared", self.fragment_max_shared, low=0, high=1)
+        if isinstance(self.statuses, (str, PoleStatus)):
+            object.__setattr__(self, "statuses", (self.statuses,))
+        try:
+            object.__setattr__(self, "statuses", tuple(PoleStatus(s) for s in self.statuses))
+        except (TypeError, ValueError):
+            raise ValueError(f"statuses must hold PoleStatus values {[s.value for s in PoleStatus]}; "
+                             f"got {self.statuses!r}") from None
+        if not self.statuses:
+            raise ValueError("statuses must not be empty")
+        if self.linkage not in ("single", "complete", "average", "weighted"):
+            raise ValueError(f"linkage must be 'single', 'complete', 'average' or 'weighted'; got {self.linkage!r}")
+
+    def to_dict(self) -> dict:
+        return {"distance_threshold": self.distance_threshold, "min_cluster_size": self.min_cluster_size,
+                "min_cluster_fraction": self.min_cluster_fraction,
+                "per_cluster_min_size": bool(self.per_cluster_min_size),
+                "max_frequency_std_per_bandwidth": self.max_frequency_std_per_bandwidth,
+                "merge_fragments": bool(self.merge_fragments), "drop_doublets": bool(self.drop_doublets),
+                "doublet_window": self.doublet_window, "doublet_min_mac": self.doublet_min_mac,
+                "fragment_std_factor": self.fragment_std_factor,
+                "fragment_min_mac": self.fragment_min_mac, "fragment_max_shared": self.fragment_max_shared,
+                "statuses": [s.value for s in self.statuses], "linkage": self.linkage}
+
+    def to_core(self):
+        c = _core.ClusteringOptions()
+        c.distance_threshold = float(self.distance_threshold)
+        c.min_cluster_size = int(self.min_cluster_size or 0)
+        c.min_cluster_fraction = float(self.min_cluster_fraction)
+        c.per_cluster_min_size = bool(self.per_cluster_min_size)
+        c.max_frequency_std_per_bandwidth = (None if self.max_frequency_std_per_bandwidth is None
+                                             else float(self.max_frequency_std_per_bandwidth))
+        c.merge_fragments = bool(self.merge_fragments)
+        c.drop_doublets = bool(self.drop_doublets)
+        c.doublet_window = float(self.doublet_window)
+        c.doublet_min_mac = float(self.doublet_min_mac)
+        c.fragment_std_factor = float(self.fragment_std_factor)
+        c.fragment_min_mac = float(self.fragment_min_mac)
+        c.fragment_max_shared = float(self.fragment_max_shared)
+        c.statuses = [CORE_OF_STATUS[s] for s in self.statuses]
+        c.linkage = getattr(_core.Linkage, self.linkage)
+        return c
