@@ -49,7 +49,7 @@ class Modes:
     block_too_short: np.ndarray | None = None    #: (n_modes,) blocks shorter than half the decay time
     singular_value_gap: float = float("nan")     #: (s_n - s_{n+1}) / its std
     close_singular_values: bool = False          #: the order cuts significant singular values within 3 std
-    noise_coupling: np.ndarray | None = None     #: (n_modes,) sigma unfrozen / frozen (docs/uq-math.md §5.5), 1 up to k*
+    noise_coupling: np.ndarray | None = None     #: (n_modes,) σ unfrozen / frozen (docs/uq-math.md §5.5)
     noise_coupled: np.ndarray | None = None      #: (n_modes,) no first-order sigma: unfrozen (large) sigma kept
     degenerate: bool = False                     #: no modes: above the numerical rank of H, or A not decomposable
     note: str = ""                               #: why the order is degenerate

@@ -7,8 +7,8 @@ helper borrowed from another module fails here with the file and line.
 from __future__ import annotations
 
 import ast
-import re
 import pathlib
+import re
 from collections import defaultdict
 
 import pytest

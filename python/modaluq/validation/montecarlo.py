@@ -32,6 +32,7 @@ from .._core import NumericalError
 from ..checks import MAX_THREADS, check_boolean, check_integer, check_real
 from ..identification import identify
 from ..results import ModalUQWarning
+from ..settings import Settings
 from ..simulate import simulate
 from .paper import METHOD_LABELS, METHODS
 
@@ -173,14 +174,10 @@ class _Config:
 
     n_samples: int
     orders: tuple
-    block_rows: int
-    past_block_rows: int | None
-    n_blocks: int
+    settings: Settings  # of the identification (orders included)
     seed: int
     match_tolerance: float
     simulation: dict = field(default_factory=dict)  # keywords of modaluq.simulate
-    freeze_noise: bool = True
-    noise_coupling_limit: float = 20.0
 
 
 def _empty_arrays(n_records: int, n_modes: int, n_outputs: int) -> dict:
@@ -221,10 +218,7 @@ def _run_chunk(indices, cfg: _Config):
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", ModalUQWarning)
                 try:
-                    result = identify(sim.y, u, fs=sim.fs, block_rows=cfg.block_rows,
-                                      past_block_rows=cfg.past_block_rows, orders=list(cfg.orders),
-                                      n_blocks=cfg.n_blocks, freeze_noise=cfg.freeze_noise,
-                                      noise_coupling_limit=cfg.noise_coupling_limit)
+                    result = identify(sim.y, u, fs=sim.fs, settings=cfg.settings)
                 except NumericalError:
                     for a in arrays.values():
                         a["failed"][m, j] = True
@@ -704,10 +698,9 @@ def monte_carlo(n_records: int = 200, *, n_samples: int = 10_000, order=12, bloc
                   "input_dofs": tuple(check_integer("input_dofs", d, minimum=0) for d in input_dofs)}
     if output_dofs is not None:
         simulation["output_dofs"] = tuple(check_integer("output_dofs", d, minimum=0) for d in output_dofs)
-    block_rows = check_integer("block_rows", block_rows, minimum=2)
-    if past_block_rows is not None:
-        past_block_rows = check_integer("past_block_rows", past_block_rows, minimum=1)
-    n_blocks = check_integer("n_blocks", n_blocks, minimum=2)
+    settings = Settings(block_rows=block_rows, past_block_rows=past_block_rows, orders=orders,
+                        n_blocks=check_integer("n_blocks", n_blocks, minimum=2), freeze_noise=freeze_noise,
+                        noise_coupling_limit=noise_coupling_limit)
     seed = check_integer("seed", seed, minimum=0)
     processes = _available_cpus() if processes is None else check_integer("processes", processes, minimum=1,
                                                                       maximum=MAX_THREADS)
@@ -720,10 +713,8 @@ def monte_carlo(n_records: int = 200, *, n_samples: int = 10_000, order=12, bloc
         raise ValueError(f"mp_context must be one of {multiprocessing.get_all_start_methods()}; "
                          f"got {mp_context!r}")
 
-    cfg = _Config(n_samples=n_samples, orders=orders, block_rows=block_rows, past_block_rows=past_block_rows,
-                  n_blocks=n_blocks, seed=seed, match_tolerance=match_tolerance, simulation=simulation,
-                  freeze_noise=check_boolean("freeze_noise", freeze_noise),
-                  noise_coupling_limit=check_real("noise_coupling_limit", noise_coupling_limit, low=1))
+    cfg = _Config(n_samples=n_samples, orders=orders, settings=settings, seed=seed, match_tolerance=match_tolerance,
+                  simulation=simulation)
     processes = min(processes, n_records)
     if chunk_size is None:
         chunk_size = max(1, min(_MAX_CHUNK, math.ceil(n_records / (4 * processes))))
@@ -775,13 +766,14 @@ def monte_carlo(n_records: int = 200, *, n_samples: int = 10_000, order=12, bloc
         MonteCarloResult(true_frequency_hz=truth["frequency_hz"], true_damping_ratio=truth["damping_ratio"],
                          **arrays[n],
                          settings={"n_records": n_records, "n_samples": n_samples, "fs": float(truth["fs"]),
-                                   "order": n, "block_rows": block_rows,
-                                   "past_block_rows": past_block_rows or block_rows, "n_blocks": n_blocks,
+                                   "order": n, "block_rows": settings.block_rows,
+                                   "past_block_rows": settings.past_block_rows or settings.block_rows,
+                                   "n_blocks": settings.n_blocks,
                                    "seed": seed, "match_tolerance": match_tolerance, "simulation": described,
                                    "simulate_keywords": {k: list(v) if isinstance(v, tuple) else v
                                                          for k, v in simulation.items()},
-                                   "paper_case": paper_case, "freeze_noise": cfg.freeze_noise,
-                                   "noise_coupling_limit": cfg.noise_coupling_limit},
+                                   "paper_case": paper_case, "freeze_noise": settings.freeze_noise,
+                                   "noise_coupling_limit": settings.noise_coupling_limit},
                          elapsed_s=elapsed, processes=processes, machine=machine, n_bootstrap=n_bootstrap)
         for n in orders)
     return results[0] if single else results
