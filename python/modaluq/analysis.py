@@ -131,12 +131,14 @@ class Analysis:
 
     @classmethod
     def from_file(cls, path, *, fs: float | None = None, format: str | None = None, read_options: dict | None = None,
-                  outputs=None, inputs=None, references=None, **kwargs) -> "Analysis":
+                  outputs=None, inputs=None, references=None, settings: Settings | None = None,
+                  criteria: StabilityCriteria | None = None,
+                  clustering: ClusteringSettings | None = None) -> "Analysis":
         """An analysis of a recording file (:func:`modaluq.io.load`).
 
         ``outputs`` / ``inputs`` / ``references`` select channels by name or index; by default
         the inputs are those the file declares (unless listed as outputs) and the outputs the
-        rest. ``kwargs``: ``settings``, ``criteria``, ``clustering`` as :meth:`from_arrays`.
+        rest. ``fs`` overrides the file's rate; ``read_options`` go to the file's reader.
         """
         rec = load(path, fs=fs, format=format, **(read_options or {}))
         names = list(rec.output_names) + list(rec.input_names)
@@ -157,7 +159,8 @@ class Analysis:
         y = np.ascontiguousarray(data[:, out_idx])
         u = np.ascontiguousarray(data[:, in_idx]) if in_idx else None
         a = cls.from_arrays(y, u, fs=rec.fs, output_names=[names[k] for k in out_idx],
-                            input_names=[names[k] for k in in_idx], references=references, **kwargs)
+                            input_names=[names[k] for k in in_idx], references=references, settings=settings,
+                            criteria=criteria, clustering=clustering)
         return dataclasses.replace(a, source=str(path), recording=rec)
 
     def with_settings(self, **changes) -> "Analysis":
