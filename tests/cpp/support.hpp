@@ -181,7 +181,7 @@ Mat pinv_drop(const Mat& A, Index drop) {
     return svd.matrixV() * inv.cast<typename Mat::Scalar>().asDiagonal() * svd.matrixU().adjoint();
 }
 
-// Explicit J_{H,R} (uq-math §4.2); output-only: identity.
+// Explicit J_{H,R} (docs/uq-math.md §4.2); output-only: identity.
 inline MatrixXd jacobian_H_R(const modaluq::Covariances& c, const modaluq::SubspaceMatrix& s) {
     const Index a = c.layout.rows_future(), b = c.layout.rows_past(), pm = c.layout.rows_input();
     const Index h = a * b;
@@ -196,8 +196,8 @@ inline MatrixXd jacobian_H_R(const modaluq::Covariances& c, const modaluq::Subsp
     return J;
 }
 
-// Explicit J_{Gamma,H} (a n x h) via B_j^+ C_j (uq-math §5.2).
-// frozen_from = k*: columns j >= k* keep only the scale term (uq-math §5.5, eq. 5.13).
+// Explicit J_{Gamma,H} (a n x h) via B_j^+ C_j (docs/uq-math.md §5.2).
+// frozen_from = k*: columns j >= k* keep only the scale term (docs/uq-math.md §5.5, eq. 5.13).
 inline MatrixXd jacobian_Gamma_H(const modaluq::Realization& re, const MatrixXd& H, Index n,
                                  Index frozen_from = std::numeric_limits<Index>::max()) {
     const Index a = H.rows(), b = H.cols(), h = a * b;
@@ -218,7 +218,7 @@ inline MatrixXd jacobian_Gamma_H(const modaluq::Realization& re, const MatrixXd&
     return J;
 }
 
-// Explicit [J_A; J_C] (n^2 + l n) x (a n) with the least-squares residual term (uq-math §6).
+// Explicit [J_A; J_C] (n^2 + l n) x (a n) with the least-squares residual term (docs/uq-math.md §6).
 inline MatrixXd jacobian_AC_Gamma(const MatrixXd& Gamma, Index l) {
     const Index a = Gamma.rows(), n = Gamma.cols();
     const MatrixXd Gup = Gamma.topRows(a - l), Gdw = Gamma.bottomRows(a - l);
@@ -238,7 +238,7 @@ inline MatrixXd jacobian_AC_Gamma(const MatrixXd& Gamma, Index l) {
     return J;
 }
 
-// Explicit J_theta,(A,C) for each reported mode: rows [f, xi, Re shape, Im shape] (uq-math §7).
+// Explicit J_theta,(A,C) for each reported mode: rows [f, xi, Re shape, Im shape] (docs/uq-math.md §7).
 inline std::vector<MatrixXd> jacobian_theta_AC(const modaluq::StateSpace& ss, double fs, const modaluq::Modes& md) {
     const Index n = ss.A.rows(), l = ss.C.rows();
     Eigen::EigenSolver<MatrixXd> es(ss.A);

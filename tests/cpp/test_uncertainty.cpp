@@ -13,7 +13,7 @@ struct Case {
 };
 
 // 3-DOF chain, 2 outputs, p != q; the known input has std 10 so that the R3+ dR3 R3+ term of
-// dH matters (uq-math §4.1).
+// dH matters (docs/uq-math.md §4.1).
 Case make_case(bool io, Index n = 6) {
     Case c;
     c.s = simulate(3, {0, 2}, 6000, 17, io, io ? 1.0 : 1.0, 0.05, 20.0, false, 10.0);

@@ -38,7 +38,7 @@ struct IdentifyOptions {
     /// work (1 = the calling thread only). Results do not depend on it. Each thread's linear
     /// algebra is single-threaded, unless a BLAS with threads of its own is linked (gemm.hpp).
     Index threads = 1;
-    /// Freeze the directions of singular vectors from the noise floor k* on (uq-math §5.5).
+    /// Freeze the directions of singular vectors from the noise floor k* on (docs/uq-math.md §5.5).
     bool freeze_noise = true;
     double noise_floor_factor = 1.5;    ///< c of (5.12), > 0
     /// rho_max of (5.14), >= 1: poles whose sigma_f or sigma_xi the noise directions inflate by
@@ -90,7 +90,7 @@ struct Identification {
     /// noise (NaN without uncertainty); identify refuses a record where it is below 3.
     double signal_to_noise = std::numeric_limits<double>::quiet_NaN();
     bool low_signal_to_noise = false;    ///< signal_to_noise < 3: the modes cannot be told from estimation noise
-    /// k*, the noise floor (uq-math eq. 5.12): singular values of H above the size of the
+    /// k*, the noise floor (docs/uq-math.md eq. 5.12): singular values of H above the size of the
     /// estimation error of their trailing block; an estimate of the model order. At most the
     /// largest order + 1 (that value also means "none below"). 0 without uncertainty.
     Index significant_singular_values = 0;

@@ -37,16 +37,16 @@ struct Modes {
     /// (symmetric, so row- and column-major readings agree).
     Eigen::MatrixXd covariance;
     /// Per mode: the block is shorter than half the mode's decay time constant
-    /// 1/(2 pi f xi), so the blocks are not independent enough for its covariance (uq-math §10.7).
+    /// 1/(2 pi f xi), so the blocks are not independent enough for its covariance (docs/uq-math.md §10.7).
     Eigen::Array<bool, Eigen::Dynamic, 1> block_too_short;
     /// (sigma_n - sigma_{n+1}) / std(sigma_n - sigma_{n+1}); NaN without uncertainty.
     double singular_value_gap = std::numeric_limits<double>::quiet_NaN();
     /// The order cuts between two significant singular values (order < k*, the noise floor)
     /// that are closer than three times the std of their difference: a pair of modes may be
-    /// split, and the first-order uncertainty of this order is not meaningful (uq-math §5.4).
+    /// split, and the first-order uncertainty of this order is not meaningful (docs/uq-math.md §5.4).
     /// Cuts inside the noise (order >= k*) are not flagged: those directions are frozen (§5.5).
     bool close_singular_values = false;
-    /// Per mode, rho of uq-math (5.14): sigma_f or sigma_xi with the noise singular vectors free
+    /// Per mode, rho of docs/uq-math.md (5.14): sigma_f or sigma_xi with the noise singular vectors free
     /// to rotate, over the same with them frozen (1 at orders <= k*, where nothing is frozen).
     Eigen::VectorXd noise_coupling;
     /// Per mode, noise_coupling > IdentifyOptions::noise_coupling_limit: the pole depends mostly

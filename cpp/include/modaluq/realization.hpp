@@ -1,7 +1,7 @@
 #pragma once
 /// @file realization.hpp
 /// One SVD of H, then the observability matrix Gamma and (A, C) at every model order
-/// (uq-math §2.2). Order n uses the leading n columns of the largest order's quantities, so
+/// (docs/uq-math.md §2.2). Order n uses the leading n columns of the largest order's quantities, so
 /// a stabilisation diagram costs one SVD and one QR.
 
 #include <Eigen/Core>
@@ -53,7 +53,7 @@ public:
         n_max_ = std::min(n_max_, rank_);
         u_ = svd.matrixU();
         v_ = svd.matrixV();
-        // Sign convention (uq-math §5.4): largest-modulus entry of each u_j positive.
+        // Sign convention (docs/uq-math.md §5.4): largest-modulus entry of each u_j positive.
         for (Index j = 0; j < u_.cols(); ++j) {
             Index imax;
             u_.col(j).cwiseAbs().maxCoeff(&imax);

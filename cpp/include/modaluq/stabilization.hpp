@@ -105,7 +105,7 @@ struct Poles {
     Eigen::MatrixXd mode_shape_std_real; ///< l x n_poles (NaN without uncertainty)
     Eigen::MatrixXd mode_shape_std_imag; ///< l x n_poles
     BoolArray close_singular_values;     ///< the pole's order cuts close significant singular values
-    BoolArray noise_coupled;             ///< no first-order sigma (uq-math §5.5)
+    BoolArray noise_coupled;             ///< no first-order sigma (docs/uq-math.md §5.5)
     std::vector<Index> orders;           ///< identified orders, ascending (an order may hold no pole)
     bool has_uncertainty = true;         ///< the std fields are estimates (false: all NaN)
 

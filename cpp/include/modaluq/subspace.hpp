@@ -1,7 +1,7 @@
 #pragma once
 /// @file subspace.hpp
 /// The subspace matrix H (paper Eq. 11) and the first step of the uncertainty,
-/// T_H = J_{H,R} T_R, applied matrix-free (uq-math §4).
+/// T_H = J_{H,R} T_R, applied matrix-free (docs/uq-math.md §4).
 
 #include <Eigen/Core>
 #include <Eigen/Eigenvalues>
@@ -50,7 +50,7 @@ inline SubspaceMatrix subspace_matrix(const Covariances& c, double input_rcond =
     return s;
 }
 
-/// T_H = J_{H,R} T_R, column by column (uq-math §4.3):
+/// T_H = J_{H,R} T_R, column by column (docs/uq-math.md §4.3):
 /// dH = dR1 - dR2 M + G dR3 M - G dR4^T. Output-only: T_H = T_R.
 inline Eigen::MatrixXd propagate_to_subspace(const SubspaceMatrix& s, const Covariances& c, Eigen::MatrixXd t_r) {
     if (!c.has_inputs()) return t_r;

@@ -1,14 +1,14 @@
 #pragma once
 /// @file uncertainty.hpp
 /// First-order propagation of the block covariance of R1..R4 to the modal parameters at
-/// every order (uq-math §5-§9; Doehler & Mevel 2013). The covariance is carried as its
+/// every order (docs/uq-math.md §5-§9; Doehler & Mevel 2013). The covariance is carried as its
 /// factor T (Sigma = T T^T), one column per block: no h x h matrix is ever formed.
 ///
 /// Stages (each a function in `detail`, each finite-difference tested):
 ///  1. T_H = J_{H,R} T_R                               subspace.hpp
 ///  2. dGamma for j <= n_max, once                      gamma_perturbation
-///     (columns at or above the noise floor k* frozen, uq-math §5.5: noise_floor)
-///     (the singular system B_j [du; dv] = C_j vec dH of uq-math §5.1 solved in the SVD
+///     (columns at or above the noise floor k* frozen, docs/uq-math.md §5.5: noise_floor)
+///     (the singular system B_j [du; dv] = C_j vec dH of docs/uq-math.md §5.1 solved in the SVD
 ///     basis, where it is diagonal: same minimum-norm solution, no b x b solve per j)
 ///  3. Q1..Q4 once at n_max; order n uses their leading n x n blocks    q_matrices
 ///     (the production path fuses 2 and 3 in QStage, which never forms dGamma)
@@ -34,7 +34,7 @@ namespace detail {
 
 using cd = std::complex<double>;
 
-/// dH in the SVD basis, what stage 2 needs (uq-math §5.1-5.3) for singular vectors j < n:
+/// dH in the SVD basis, what stage 2 needs (docs/uq-math.md §5.1-5.3) for singular vectors j < n:
 /// P = dH V_{n1} (dH v_j, n1 >= n columns), Ua = U^T P (u_i^T dH v_j), and Omega (r x n) with
 /// du_j = U Omega_j + dH v_j / s_j:
 /// Omega_ij = (s_j Ua_ij + s_i u_j^T dH v_i) / (s_j^2 - s_i^2) for i != j, Omega_jj = 0, then
@@ -68,8 +68,8 @@ inline SvdPerturbation svd_perturbation(const Realization& re, const Eigen::Ref<
 
 /// Stage 2: dGamma (a x n) for one perturbation dH of H, and d sigma_j for j < n_sigma:
 /// dGamma = (U Omega + P_n S^-1) S^{1/2} + U_n diag(d s_j / (2 sqrt s_j)), d s_j = Ua_jj
-/// (uq-math §5.1-5.3). The reference for the fused QStage below.
-/// With `frozen_from` = k < n, the columns j >= k are frozen (uq-math §5.5, eq. 5.13): D_j = 0,
+/// (docs/uq-math.md §5.1-5.3). The reference for the fused QStage below.
+/// With `frozen_from` = k < n, the columns j >= k are frozen (docs/uq-math.md §5.5, eq. 5.13): D_j = 0,
 /// so only their scale moves, d gamma_j = u_j d s_j / (2 sqrt s_j).
 inline Eigen::MatrixXd gamma_perturbation(const Realization& re, const Eigen::Ref<const Eigen::MatrixXd>& dh,
                                           Index n, Eigen::VectorXd* dsigma = nullptr, Index n_sigma = 0,
@@ -90,7 +90,7 @@ inline Eigen::MatrixXd gamma_perturbation(const Realization& re, const Eigen::Re
 }
 
 /// Stage 3 for one block: Qa = Q3 + Q2^T, Qb = Q1 + Q1^T, Q4 = dC, with
-/// Q1 = Gamma_up^T dGamma_up, Q2 = Gamma_dw^T dGamma_up, Q3 = Gamma_up^T dGamma_dw (uq-math §9).
+/// Q1 = Gamma_up^T dGamma_up, Q2 = Gamma_dw^T dGamma_up, Q3 = Gamma_up^T dGamma_dw (docs/uq-math.md §9).
 inline void q_matrices(const Eigen::MatrixXd& gamma, const Eigen::MatrixXd& dgamma, Index l,
                        Eigen::Ref<Eigen::MatrixXd> qa, Eigen::Ref<Eigen::MatrixXd> qb,
                        Eigen::Ref<Eigen::MatrixXd> q4) {
@@ -114,7 +114,7 @@ inline void q_matrices(const Eigen::MatrixXd& gamma, const Eigen::MatrixXd& dgam
 /// gives K = [I 0] - U_{n,bot}^T U_bot over the last l rows only, so Q1 is almost free and
 /// the a x r x n product U Omega is not needed: 8 n^2 a flops per block instead of 14.
 ///
-/// Frozen columns (uq-math §5.5): every X above is, column by column, linear in column j of Omega
+/// Frozen columns (docs/uq-math.md §5.5): every X above is, column by column, linear in column j of Omega
 /// and of P, so freezing columns j >= k* (D_j = 0) is zeroing those columns of the X's and of
 /// D_top; the E term keeps d s_j. Both sets of Q matrices come from one pass.
 struct QBlock {
@@ -278,7 +278,7 @@ struct OrderContext {
 /// matrices restricted to the order (leading n x n blocks):
 /// Z = Qa phi - lambda Qb phi, dA phi = W Z, d lambda = chi^H dA phi / chi^H phi,
 /// d phi = sum_{j != i} phi_j chi_j^H (dA phi - phi d lambda) / (lambda_i - lambda_j)
-/// (a particular solution; the normalised mode shape does not depend on which, uq-math §7).
+/// (a particular solution; the normalised mode shape does not depend on which, docs/uq-math.md §7).
 inline void eigen_perturbation(const OrderContext& ctx, const Eigen::Ref<const Eigen::MatrixXd>& qa,
                                const Eigen::Ref<const Eigen::MatrixXd>& qb,
                                const Eigen::Ref<const Eigen::MatrixXd>& q4, Eigen::Ref<Eigen::VectorXcd> dlambda,
@@ -374,7 +374,7 @@ inline void eigen_perturbation_blocks(const OrderContext& ctx, const BlockQ& q, 
     }
 }
 
-/// Rows [f, xi] of stage 5 (uq-math §7) from d lambda (1 x nb): d mu = fs d lambda / lambda,
+/// Rows [f, xi] of stage 5 (docs/uq-math.md §7) from d lambda (1 x nb): d mu = fs d lambda / lambda,
 /// df = Re(conj(mu) d mu) / (2 pi |mu|), d xi = Im(mu) Im(conj(mu) d mu) / |mu|^3 (signs below).
 inline Eigen::MatrixXd frequency_damping_perturbation(cd lambda, double fs,
                                                       const Eigen::Ref<const Eigen::RowVectorXcd>& dlambda) {
@@ -389,7 +389,7 @@ inline Eigen::MatrixXd frequency_damping_perturbation(cd lambda, double fs,
 }
 
 /// Stage 5 for one mode: rows [f, xi, Re shape (l), Im shape (l)] of the perturbation factor
-/// from d lambda (1 x nb) and d(C phi) (l x nb) (uq-math §7, normalised shape with the
+/// from d lambda (1 x nb) and d(C phi) (l x nb) (docs/uq-math.md §7, normalised shape with the
 /// reference component fixed at its nominal index).
 inline Eigen::MatrixXd modal_perturbation(cd lambda, double fs, const Eigen::VectorXcd& raw_shape, Index kref,
                                           const Eigen::Ref<const Eigen::RowVectorXcd>& dlambda,
@@ -408,7 +408,7 @@ inline Eigen::MatrixXd modal_perturbation(cd lambda, double fs, const Eigen::Vec
 
 }  // namespace detail
 
-/// How the propagation treats the singular vectors below the noise floor (uq-math §5.5).
+/// How the propagation treats the singular vectors below the noise floor (docs/uq-math.md §5.5).
 struct NoiseOptions {
     /// Hold the directions of the singular vectors from the noise floor k* on fixed (their scale
     /// still moves). false propagates every rotation, as first-order theory alone would.

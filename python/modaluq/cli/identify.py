@@ -145,7 +145,7 @@ def _check_outputs(args):
 
 def _settings(args) -> tuple:
     """The options as the library's settings objects, an error naming the option."""
-    options = {a.dest for a in register.parser._actions}
+    options = set(vars(args))  # every option, by its parameter name
     try:
         settings = Settings(block_rows=args.block_rows, past_block_rows=args.past_block_rows, n_blocks=args.n_blocks,
                             uncertainty=not args.no_uncertainty, frequency_range=args.frequency_range,
@@ -176,7 +176,7 @@ def run(args) -> int:
     if args.orders is not None:
         _order_spec(args.orders)  # syntax, before the data are loaded; the bound needs them
     read_options = parse_read_options(args.read_option)
-    options = {"outputs", "inputs", "references", "block_rows", "past_block_rows"}
+    options = set(vars(args))
 
     n_steps = 4 + bool(args.plot) + bool(args.plot_shapes) + len(args.out or [])
     # shown on stderr only when it is a terminal (disable=None), cleared when done (leave=False)
@@ -335,5 +335,4 @@ def register(subparsers) -> argparse.ArgumentParser:
                    help="replace existing output files (the input file is never overwritten)")
     g.add_argument("--no-progress", action="store_true", help="no progress display on stderr")
     p.set_defaults(func=run)
-    register.parser = p  # the option names, for errors that name a setting
     return p

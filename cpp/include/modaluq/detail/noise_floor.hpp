@@ -1,6 +1,6 @@
 #pragma once
 /// @file noise_floor.hpp
-/// The noise floor k* of H (uq-math §5.5): the first singular value that is not larger than the
+/// The noise floor k* of H (docs/uq-math.md §5.5): the first singular value that is not larger than the
 /// typical perturbation of the trailing block of H by its own estimation error. Singular vectors
 /// from k* on span estimation noise; their first-order rotations mean nothing (Weyl).
 
