@@ -1,6 +1,7 @@
 // Time per stage of the C++ core on the benchmark configurations (no Python).
-// Build: g++ -O3 -march=native -DNDEBUG -std=c++17 -I cpp/include -I /usr/include/eigen3 bench/stages.cpp
-//        [-DMODALUQ_USE_BLAS -lopenblas]   (large products through OpenBLAS; run with OPENBLAS_NUM_THREADS=1)
+// Build (bench/CMakeLists.txt): cmake -S . -B build/bench -DMODALUQ_BUILD_BENCH=ON -DMODALUQ_NATIVE=ON
+//        && cmake --build build/bench --target stages; run build/bench/bench/stages [U3] with
+//        OPENBLAS_NUM_THREADS=1 (large products through OpenBLAS when found)
 #include <modaluq/modaluq.hpp>
 
 #include <chrono>
@@ -77,7 +78,7 @@ static void run(const char* name, Index l, Index n, Index p, Index nmax, Index n
     for (Index k : o.orders) {
         const auto te = clk::now();
         const StateSpace ss = re.system(k);
-        detail::Eigenstructure eig;
+        Eigenstructure eig;
         Modes m = modes_from_system(ss, o.fs, prop ? &eig : nullptr);
         t_eig += since(te);
         if (prop) prop->apply(m, eig, ss, o.fs, 100.0);

@@ -2,7 +2,8 @@
 # Set up and run every test of modaluq on a Debian/Ubuntu machine (the command CI runs):
 #   1. scripts/setup.sh --test: system packages, the virtual environment .venv, the package;
 #   2. the C++ core's tests (ctest), built with assertions on and AddressSanitizer +
-#      UndefinedBehaviorSanitizer, so a read out of bounds or an overflow fails the run;
+#      UndefinedBehaviorSanitizer, so a read out of bounds or an overflow fails the run; the
+#      build also compiles every header on its own (MODALUQ_CHECK_HEADERS, tests/cpp);
 #   3. a C++ project built against the installed headers (cpp/examples);
 #   4. ruff, then pytest (oracle cross-validation, Monte Carlo, loaders, CLI, the layers of the
 #      package, the docstring examples; every warning is an error unless a test expects it);
@@ -22,6 +23,9 @@ cmake -S . -B build/cpp-sanitize -DCMAKE_BUILD_TYPE=Debug -DCMAKE_CXX_FLAGS="$sa
 cmake --build build/cpp-sanitize -j"$JOBS"
 ASAN_OPTIONS=detect_leaks=1:abort_on_error=0 UBSAN_OPTIONS=print_stacktrace=1 \
   ctest --test-dir build/cpp-sanitize --output-on-failure -j"$JOBS"
+
+echo "== CMake: modaluq as a subproject leaves the parent's build type, BLAS and tests alone"
+cmake -S tests/cmake_subproject -B build/cmake-subproject >/dev/null
 
 echo "== C++ consumer project against the installed package"
 cmake --install build/cpp-sanitize --prefix build/prefix >/dev/null

@@ -1,6 +1,6 @@
 #include <doctest/doctest.h>
 
-#include "support.hpp"
+#include "support/support.hpp"
 
 using namespace support;
 

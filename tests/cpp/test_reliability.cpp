@@ -7,7 +7,7 @@
 
 #include <modaluq/detail/parallel.hpp>
 
-#include "support.hpp"
+#include "support/support.hpp"
 
 using namespace support;
 

@@ -222,7 +222,7 @@ inline Identification identify_with_factor(const Covariances& cov, Eigen::Matrix
         } else {
             try {
                 const StateSpace ss = re.system(n);
-                detail::Eigenstructure eig;
+                Eigenstructure eig;
                 m = modes_from_system(ss, options.fs, prop ? &eig : nullptr);
                 if (prop) prop->apply(m, eig, ss, options.fs, block_seconds);
             } catch (const numerical_error& e) {

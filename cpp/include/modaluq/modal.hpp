@@ -61,10 +61,9 @@ struct Modes {
     Index n_modes() const { return frequency_hz.size(); }
 };
 
-namespace detail {
-
-/// Eigen-decomposition of A kept for the uncertainty: A = V diag(values) V^{-1}; the rows of
-/// V^{-1} are left eigenvectors chi^H with chi_i^H phi_i = 1.
+/// The eigen-decomposition of A behind one order's modes, what the uncertainty propagation
+/// (UncertaintyPropagator::apply) needs besides the modes: A = V diag(values) V^{-1}; the rows
+/// of V^{-1} are left eigenvectors chi^H with chi_i^H phi_i = 1.
 struct Eigenstructure {
     Eigen::VectorXcd values;
     Eigen::MatrixXcd right;      ///< V
@@ -72,11 +71,9 @@ struct Eigenstructure {
     std::vector<Index> kept;     ///< index into values of each reported mode, in frequency order
 };
 
-}  // namespace detail
-
 /// Modes of (A, C) sampled at fs Hz. If `eig` is given, the eigen-decomposition is stored
 /// there for the uncertainty propagation.
-inline Modes modes_from_system(const StateSpace& ss, double fs, detail::Eigenstructure* eig = nullptr) {
+inline Modes modes_from_system(const StateSpace& ss, double fs, Eigenstructure* eig = nullptr) {
     using cd = std::complex<double>;
     const Index n = ss.A.rows();
     if (!ss.A.allFinite() || !ss.C.allFinite())

@@ -3,9 +3,11 @@
 // matrices) and the explicit full uncertainty path (Kronecker Jacobians, Sigma_H formed),
 // against which the efficient production code is checked.
 
-#include "eigen_instances.hpp"
+#include "../eigen_instances.hpp"
 
 #include <modaluq/modaluq.hpp>
+
+#include "reference_stages.hpp"
 #include <unsupported/Eigen/MatrixFunctions>
 
 #include <random>

@@ -1,0 +1,210 @@
+// selection.hpp: clustering stable poles into modes (detail/linkage.hpp), minimum sizes, the
+// representative and its sigma, joined fragments and dropped twins.
+#include <doctest/doctest.h>
+
+#include "support/stabilization_cases.hpp"
+
+using namespace support;
+using modaluq::PoleStatus;
+
+namespace {
+
+// The definition: merge the closest pair of clusters (by the linkage's cluster distance computed
+// from the members' distances) until the closest pair is farther than the threshold.
+std::vector<std::set<Index>> naive_clusters(const MatrixXd& d, modaluq::Linkage linkage, double t) {
+    std::vector<std::set<Index>> c;
+    for (Index i = 0; i < d.rows(); ++i) c.push_back({i});
+    auto between = [&](const std::set<Index>& a, const std::set<Index>& b) {
+        double lo = 1e300, hi = -1e300, sum = 0;
+        for (Index i : a)
+            for (Index j : b) { lo = std::min(lo, d(i, j)); hi = std::max(hi, d(i, j)); sum += d(i, j); }
+        switch (linkage) {
+            case modaluq::Linkage::single: return lo;
+            case modaluq::Linkage::complete: return hi;
+            default: return sum / double(a.size() * b.size());
+        }
+    };
+    for (;;) {
+        double best = 1e300;
+        std::size_t ba = 0, bb = 0;
+        for (std::size_t a = 0; a < c.size(); ++a)
+            for (std::size_t b = a + 1; b < c.size(); ++b)
+                if (const double x = between(c[a], c[b]); x < best) { best = x; ba = a; bb = b; }
+        if (c.size() < 2 || best > t) break;
+        c[ba].insert(c[bb].begin(), c[bb].end());
+        c.erase(c.begin() + std::ptrdiff_t(bb));
+    }
+    return c;
+}
+
+}  // namespace
+
+TEST_CASE("clustering: the nearest-neighbour chain equals the naive definition") {
+    std::mt19937_64 rng(11);
+    std::uniform_real_distribution<double> U(0.0, 1.0);
+    for (int trial = 0; trial < 40; ++trial) {
+        const Index n = 2 + Index(U(rng) * 40);
+        MatrixXd x(n, 2);
+        for (Index i = 0; i < n; ++i) x.row(i) << U(rng) * 3, U(rng);
+        MatrixXd d(n, n);
+        for (Index i = 0; i < n; ++i)
+            for (Index j = 0; j < n; ++j) d(i, j) = (x.row(i) - x.row(j)).norm();
+        const double t = 0.05 + 0.5 * U(rng);
+        for (auto linkage : {modaluq::Linkage::single, modaluq::Linkage::complete, modaluq::Linkage::average}) {
+            CAPTURE(trial);
+            CAPTURE(int(linkage));
+            const auto label = modaluq::detail::flat_clusters(d, linkage, t);
+            std::map<Index, std::set<Index>> by_label;
+            for (Index i = 0; i < n; ++i) by_label[label[i]].insert(i);
+            std::set<std::set<Index>> got, want;
+            for (auto& kv : by_label) got.insert(kv.second);
+            for (auto& s : naive_clusters(d, linkage, t)) want.insert(s);
+            CHECK(got == want);
+        }
+    }
+}
+
+TEST_CASE("selection: clusters, one pole per order, minimum size, representative and sigma") {
+    std::map<Index, std::vector<P>> by_order;
+    for (Index n = 2; n <= 40; n += 2) {  // 20 orders
+        std::vector<P> list;
+        list.push_back({10.0 + 1e-4 * double(n % 3), 0.02, 0, 0.01 + 1e-4 * double(n)});
+        if (n >= 10) list.push_back({25.0 + 1e-4 * double(n % 2), 0.01, 1});  // 16 orders
+        if (n == 20 || n == 22) list.push_back({33.0, 0.01, 2});             // 2 orders: dropped
+        if (n == 30) list.push_back({10.0005, 0.02, 0});                      // a twin at one order
+        if (n == 36) list[1].coupled = true;  // the 25 Hz pole
+        by_order[n] = list;
+    }
+    const modaluq::Diagram d = all_stable(by_order);
+    const modaluq::Poles& poles = d.poles;
+    const auto s = modaluq::select_modes(d);
+    // default minimum: a quarter of the 20 orders from the lowest clustered order, at least 3
+    CHECK(s.min_cluster_size == 5);
+    REQUIRE(s.n_modes() == 2);
+    CHECK(s.frequency_hz(0) == doctest::Approx(10.0).epsilon(1e-4));
+    CHECK(s.n_poles(0) == 20);  // the twin at order 30 is not a second member of that order
+    CHECK(s.n_poles(1) == 16);
+    CHECK(s.order_min(1) == 10);
+    CHECK(s.order_max(1) == 40);
+    REQUIRE(s.dropped_n_poles.size() == 1);
+    CHECK(s.dropped_n_poles(0) == 2);
+    CHECK(s.dropped_frequency_hz(0) == doctest::Approx(33.0));
+    // the sigma of mode 1 is the median of its members' sigma: 0.01 + 1e-4 n over n = 2..40
+    CHECK(s.frequency_std(0) == doctest::Approx(0.01 + 1e-4 * 21.0));
+    // the representative is never the noise-coupled pole, and its sigma excludes it
+    const Index rep1 = s.representative_pole(1);
+    CHECK_FALSE(poles.noise_coupled(rep1));
+    CHECK(s.frequency_std(1) == doctest::Approx(25.0e-3).epsilon(1e-5));
+    for (Index k = 0; k < 2; ++k)
+        for (Index i : s.members[std::size_t(k)]) CHECK(s.mode_of_pole(i) == k);
+    CHECK(s.frequency_spread(0) > 0);
+    CHECK(s.min_mac(0) == doctest::Approx(1.0));
+
+    modaluq::ClusteringOptions o;
+    o.min_cluster_size = 2;
+    CHECK(modaluq::select_modes(d, o).n_modes() == 3);
+    o.statuses = {PoleStatus::unstable};
+    CHECK(modaluq::select_modes(d, o).n_modes() == 0);
+    o = {};
+    o.distance_threshold = -1;
+    CHECK_THROWS_WITH_AS(modaluq::select_modes(d, o), doctest::Contains("distance_threshold"),
+                         modaluq::invalid_argument);
+}
+
+TEST_CASE("selection: a cluster whose frequency is less certain than its peak's bandwidth is dropped") {
+    // Two stable columns over 10 orders: a 2 %-damped mode with sigma_f = 0.1 % of f
+    // (sigma_f / (f xi) = 0.05) and a 0.5 %-damped column with sigma_f = 1 % of f (ratio 2).
+    std::map<Index, std::vector<P>> by_order;
+    for (Index n = 2; n <= 20; n += 2) by_order[n] = {{5.0, 0.02, 0}, {12.0, 0.005, 1, 0.12}};
+    const modaluq::Diagram d = all_stable(by_order);
+    auto s = modaluq::select_modes(d);
+    REQUIRE(s.n_modes() == 1);
+    CHECK(s.frequency_hz(0) == doctest::Approx(5.0));
+    CHECK(s.frequency_std_per_bandwidth(0) == doctest::Approx(0.005 / (5.0 * 0.02)));
+    REQUIRE(s.dropped_reason.size() == 1);
+    CHECK(s.dropped_frequency_hz(0) == doctest::Approx(12.0));
+    CHECK(s.dropped_reason[0] == "frequency std 2 x the half-power bandwidth f xi (more than 1)");
+    modaluq::ClusteringOptions o;
+    o.max_frequency_std_per_bandwidth.reset();
+    CHECK(modaluq::select_modes(d, o).n_modes() == 2);
+    o.max_frequency_std_per_bandwidth = 3.0;
+    CHECK(modaluq::select_modes(d, o).n_modes() == 2);
+    // a too-small cluster says so
+    o = {};
+    o.min_cluster_size = 11;
+    s = modaluq::select_modes(d, o);
+    CHECK(s.n_modes() == 0);
+    REQUIRE(s.dropped_reason.size() == 2);
+    CHECK(s.dropped_reason[0] == "10 poles, fewer than 11");
+}
+
+TEST_CASE("selection: the per-cluster minimum size counts the orders from the cluster's first order") {
+    // orders 2..40 (20); a mode from order 2 on, and one that appears only from order 30 on (6 orders)
+    std::map<Index, std::vector<P>> by_order;
+    for (Index n = 2; n <= 40; n += 2) {
+        by_order[n] = {{5.0, 0.02, 0}};
+        if (n >= 30) by_order[n].push_back({12.0, 0.02, 1});
+    }
+    const modaluq::Diagram d = all_stable(by_order);
+    modaluq::ClusteringOptions o;
+    o.min_cluster_fraction = 0.5;  // global: 10 poles needed, the late mode has 6
+    CHECK(modaluq::select_modes(d, o).n_modes() == 1);
+    o.per_cluster_min_size = true;  // per cluster: half of its 6 orders
+    const auto s = modaluq::select_modes(d, o);
+    CHECK(s.n_modes() == 2);
+    CHECK(s.min_cluster_size == 3);
+}
+
+TEST_CASE("selection: pieces of one mode are joined, two modes at the same orders are not") {
+    auto select = [](const std::map<Index, std::vector<P>>& by_order, bool merge) {
+        const modaluq::Diagram d = all_stable(by_order);
+        modaluq::ClusteringOptions o;
+        o.merge_fragments = merge;
+        o.drop_doublets = false;  // tested below
+        o.min_cluster_size = 12;
+        return modaluq::select_modes(d, o);
+    };
+    // one mode at 10 Hz whose shape changes between orders 20 and 22: two pieces of 10 poles
+    std::map<Index, std::vector<P>> pieces;
+    for (Index n = 2; n <= 40; n += 2) pieces[n] = {{10.0 + 1e-3 * double(n % 4), 0.02, n <= 20 ? 0 : 3}};
+    CHECK(select(pieces, false).n_modes() == 0);  // each piece alone is too small
+    const auto joined = select(pieces, true);
+    REQUIRE(joined.n_modes() == 1);
+    CHECK(joined.n_poles(0) == 20);
+    // two modes 0.05 % apart with the same shapes, present at the same orders: never joined
+    std::map<Index, std::vector<P>> pair;
+    for (Index n = 2; n <= 40; n += 2) pair[n] = {{10.0, 0.02, 0}, {10.005, 0.02, 3}};
+    const auto two = select(pair, true);
+    CHECK(two.n_modes() == 2);
+    // a piece farther than 3 combined sigma is another mode
+    std::map<Index, std::vector<P>> apart;
+    for (Index n = 2; n <= 40; n += 2) apart[n] = {{n <= 20 ? 10.0 : 10.1, 0.02, n <= 20 ? 0 : 3}};
+    CHECK(select(apart, true).n_modes() == 0);
+}
+
+TEST_CASE("selection: the later of two alike clusters a few per cent apart is dropped as a twin") {
+    // a mode at 10 Hz from order 2; from order 20 a twin at 10.3 Hz with a shape of MAC 0.88,
+    // lightly damped; and a mode at 10.2 Hz of another shape (MAC 0.10) from order 10
+    std::map<Index, std::vector<P>> by_order;
+    for (Index n = 2; n <= 40; n += 2) {
+        by_order[n] = {{10.0, 0.02, 0}};
+        if (n >= 10) by_order[n].push_back({10.2, 0.02, 1});
+        if (n >= 20) by_order[n].push_back({10.3, 0.003, 3});
+    }
+    const modaluq::Diagram d = all_stable(by_order);
+    modaluq::ClusteringOptions o;
+    o.min_cluster_size = 5;
+    const auto s = modaluq::select_modes(d, o);
+    REQUIRE(s.n_modes() == 2);
+    CHECK(s.frequency_hz(0) == doctest::Approx(10.0));
+    CHECK(s.frequency_hz(1) == doctest::Approx(10.2));
+    REQUIRE(s.dropped_reason.size() == 1);
+    CHECK(s.dropped_frequency_hz(0) == doctest::Approx(10.3));
+    CHECK(s.dropped_reason[0] == "a twin of the 10 Hz mode: same shape (MAC 0.88), 3 % away, from order 20 "
+                                 "(the mode from order 2)");
+    o.drop_doublets = false;
+    CHECK(modaluq::select_modes(d, o).n_modes() == 3);
+    o.drop_doublets = true;
+    o.doublet_window = 0.02;
+    CHECK(modaluq::select_modes(d, o).n_modes() == 3);
+}
