@@ -183,7 +183,7 @@ def test_cli_bad_band_exits_2_naming_it(tmp_path, capsys):
     np.savez(path, y=np.random.default_rng(0).standard_normal((5_000, 2)), fs=50.0)
     rc = main(["identify", str(path), "--frequency-range", "5", "40", "--no-progress"])
     err = capsys.readouterr().err
-    assert rc == 2 and "frequency_range" in err
+    assert rc == 2 and "--frequency-range upper edge 40 Hz must be below the Nyquist frequency" in err
 
 
 @pytest.mark.skipif(not (DATA / "koma_shearframe_sim.npz").exists(), reason="shared records not present")
