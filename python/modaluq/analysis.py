@@ -164,9 +164,13 @@ class Analysis:
         return dataclasses.replace(a, source=str(path), recording=rec)
 
     def with_settings(self, **changes) -> "Analysis":
-        """A copy (not run) whose :class:`~modaluq.Settings` has ``changes``."""
-        return dataclasses.replace(self, settings=self.settings.replace(**changes), preprocessed=None, result=None,
-                                   diagram=None, selected=None, horizons=None, warnings=())
+        """A copy (not run) whose :class:`~modaluq.Settings` has ``changes``; the preprocessed record
+        is kept when no preprocessing field changes (the command line sets the orders after it)."""
+        settings = self.settings.replace(**changes)
+        kept = self.preprocessed if settings.preprocessing == self.settings.preprocessing else None
+        return dataclasses.replace(self, settings=settings, preprocessed=kept, result=None, diagram=None,
+                                   selected=None, harmonic_kurtosis=np.zeros(0),
+                                   possible_harmonic=np.zeros(0, bool), horizons=None, warnings=())
 
     # ------------------------------------------------------------------ steps
 

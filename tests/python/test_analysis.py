@@ -98,6 +98,15 @@ def test_analysis_equals_identify_diagram_and_selection(sim):
     json.dumps(report)  # plain values
 
 
+def test_with_settings_keeps_the_preprocessed_record_only_when_its_fields_do_not_change(sim):
+    a = Analysis.from_arrays(sim.y, fs=sim.fs, settings=Settings(block_rows=21, frequency_range=(1, 20)))
+    pre = a.preprocess()
+    b = a.with_settings(orders=range(2, 41, 2))
+    assert b.preprocessed is pre and b.result is None
+    c = a.with_settings(frequency_range=(1, 10))
+    assert c.preprocessed is None and c.preprocess().frequency_range == (1, 10)
+
+
 def test_analysis_refuses_to_report_before_it_runs_and_names_bad_channels(sim):
     a = Analysis.from_arrays(sim.y, fs=sim.fs)
     with pytest.raises(ValueError, match="call .run\\(\\) first"):
