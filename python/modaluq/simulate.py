@@ -505,7 +505,7 @@ class Simulation:
 
 def simulate(n_samples=10_000, *, seed=None, n_dof=6, output_dofs=None, input_dofs=(0,),
              damping_ratio=0.02, fs=50.0, input_std=1.0, unknown_input_std=0.1,
-             noise_std=0.05, discard=3000):
+             noise_std=0.05, discard=3000, mass=1 / 20, stiffness=None):
     """Simulate input/output data of the grounded mass-spring chain (paper §5.1).
 
     The defaults reproduce the paper's test case: 6 masses of 1/20 kg, stiffnesses
@@ -543,6 +543,9 @@ def simulate(n_samples=10_000, *, seed=None, n_dof=6, output_dofs=None, input_do
     discard : int, default 3000
         Leading samples dropped so that the start from rest has decayed (for 2 % damping at
         1.93 Hz, 3000 samples at 50 Hz are about 15 time constants).
+    mass, stiffness : float or array_like of shape (n_dof,)
+        The chain's masses (kg) and springs (N/m), see :func:`chain_system` (default: the
+        paper's 1/20 kg and 100/200 N/m alternating).
 
     Returns
     -------
@@ -581,7 +584,7 @@ def simulate(n_samples=10_000, *, seed=None, n_dof=6, output_dofs=None, input_do
     output_dofs = _dof_tuple("output_dofs", output_dofs, n_dof, allow_empty=False)
     input_dofs = _dof_tuple("input_dofs", input_dofs, n_dof, allow_empty=True)
 
-    M, K, Cdamp = chain_system(n_dof, damping_ratio=damping_ratio)
+    M, K, Cdamp = chain_system(n_dof, mass=mass, stiffness=stiffness, damping_ratio=damping_ratio)
     frequency_hz, xi, mode_shape = modal_parameters(M, K, Cdamp, output_dofs=output_dofs)
     if frequency_hz[-1] >= fs / 2:
         warnings.warn(f"highest mode ({frequency_hz[-1]:.4g} Hz) is at or above the Nyquist "

@@ -23,14 +23,16 @@ LAYERS = {
     # settings and the signal helpers they are applied with; the side leaves (files, simulator)
     "modaluq.settings": 2, "modaluq.preprocess": 2, "modaluq.auto_settings": 2, "modaluq.spectrum": 2,
     "modaluq.harmonics": 2, "modaluq.provenance": 2, "modaluq.simulate": 2, "modaluq.io.*": 2,
+    "modaluq.monitoring_simulator": 2,
     "modaluq.results": 3,
     "modaluq.identification": 4, "modaluq.streaming": 4,
     "modaluq.stabilization": 5,
-    "modaluq.selection": 6,
+    "modaluq.selection": 6, "modaluq.tracking": 6,
     "modaluq.horizons": 7, "modaluq.analysis": 7, "modaluq.validation.*": 7,
     "modaluq.plot": 8, "modaluq.export": 8,
-    "modaluq.cli.*": 9,
-    "modaluq": 10,  # the package's namespace: re-exports the public API
+    "modaluq.monitor": 9,  # many records: analysis, tracking, plots and stores
+    "modaluq.cli.*": 10,
+    "modaluq": 11,  # the package's namespace: re-exports the public API
 }
 
 #: Result types whose convenience methods may import a layer above (``Result.plot()``): the one
@@ -38,7 +40,8 @@ LAYERS = {
 CONVENIENCE_CLASSES = {"Result", "Diagram", "SelectedModes", "MonteCarloResult"}
 
 #: Side leaves: they import nothing of the package but these (and their own subpackage).
-SIDE_LEAVES = {"modaluq.io": {"modaluq.checks"}, "modaluq.simulate": {"modaluq.checks"}}
+SIDE_LEAVES = {"modaluq.io": {"modaluq.checks"}, "modaluq.simulate": {"modaluq.checks"},
+               "modaluq.monitoring_simulator": {"modaluq.checks", "modaluq.simulate"}}
 
 
 def module_name(path: pathlib.Path) -> str:

@@ -9,7 +9,7 @@ import argparse
 import sys
 
 from ..version import __version__
-from . import demo, identify, validate
+from . import demo, identify, monitor, validate
 from .common import Parser
 
 __all__ = ["build_parser", "main"]
@@ -24,7 +24,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--version", action="version", version=f"modaluq {__version__}")
     sub = p.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
-    for command in (demo, identify, validate):
+    for command in (demo, identify, monitor, validate):
         command.register(sub)
     return p
 

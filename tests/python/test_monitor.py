@@ -1,0 +1,267 @@
+"""modaluq.monitor and ``modaluq monitor``: the batch, its part files, executors and stores."""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+import modaluq
+from modaluq.cli import main
+from modaluq.monitor import load_tracks, monitor, record_files, time_from_name
+from modaluq.monitoring_simulator import simulate_monitoring
+from modaluq.tracking import TrackingSettings
+
+pytest.importorskip("xarray")
+SETTINGS = modaluq.Settings(orders=tuple(range(2, 25, 2)))
+
+
+@pytest.fixture(scope="module")
+def campaign():
+    return simulate_monitoring(24, n_samples=6000, seed=11)
+
+
+@pytest.fixture(scope="module")
+def serial(campaign):
+    return monitor(campaign.records, settings=SETTINGS, threads=1, progress=False)
+
+
+def assert_same_tracks(a, b):
+    import xarray as xr
+
+    xr.testing.assert_identical(a.dataset, b.dataset)
+    assert a.poles.equals(b.poles)
+
+
+# ------------------------------------------------------------------------------ simulator
+
+
+def test_simulator_temperature_moves_the_frequencies_and_damage_moves_its_element(campaign):
+    assert len(campaign) == 24 and campaign.frequency_hz.shape == (24, 6)
+    # stiffness (1 + c (T - T0)) with c < 0: f ∝ sqrt(stiffness), so the colder the stiffer
+    expected = campaign.frequency_hz[0] * np.sqrt((1 - 0.004 * (campaign.temperature[5] - 10))
+                                                  / (1 - 0.004 * (campaign.temperature[0] - 10)))
+    np.testing.assert_allclose(campaign.frequency_hz[5], expected, rtol=1e-10)
+    damaged = simulate_monitoring(6, n_samples=1000, seed=11, temperature=np.full(6, 10.0), damage_element=0,
+                                  damage_record=3, damage_fraction=0.1)
+    assert damaged.damaged.tolist() == [False] * 3 + [True] * 3
+    assert np.all(damaged.frequency_hz[3] < damaged.frequency_hz[2]) and np.all(damaged.frequency_hz[4] == damaged.frequency_hz[3])
+    assert damaged.records[3].stiffness[0] == pytest.approx(90.0) and damaged.records[3].stiffness[1] == pytest.approx(200.0)
+    # a record is the same whenever it is loaded (its own random stream)
+    np.testing.assert_array_equal(campaign.records[3].load().y, campaign.records[3].load().y)
+    with pytest.raises(ValueError, match="damage_element and damage_record"):
+        simulate_monitoring(3, damage_element=0)
+
+
+# ------------------------------------------------------------------------------ the batch
+
+
+def test_monitor_tracks_every_mode_of_the_simulator(serial, campaign):
+    ds = serial.dataset
+    assert serial.n_failed == 0 and ds.sizes["record"] == 24 and ds.sizes["mode"] == 6
+    # tracked mode j is the true mode j at every record: within 5 σ of the truth
+    z = (ds["frequency_hz"].values - campaign.frequency_hz) / ds["frequency_std"].values
+    assert np.nanmax(np.abs(z)) < 5 and np.isfinite(z).mean() > 0.95
+    assert ds["in_reference"].values.sum() == 20
+    assert ds["time"].values[1] - ds["time"].values[0] == np.timedelta64(3600, "s")
+    assert "temperature" in ds and ds.attrs["false_alarm_rate"] == 0.01
+    assert set(serial.poles["tracked_mode"].dropna().unique()) <= set(range(1, 7))
+    assert "24 records: 24 identified, 0 failed" in str(serial)
+
+
+def test_results_do_not_depend_on_the_number_of_threads(serial, campaign):
+    assert_same_tracks(serial, monitor(campaign.records, settings=SETTINGS, threads=2, progress=False))
+
+
+def test_store_round_trip_netcdf_zarr_parquet(serial, campaign, tmp_path):
+    out = tmp_path / "tracks.nc"
+    m = monitor(campaign.records, settings=SETTINGS, out=out, progress=False, poles=tmp_path / "poles.parquet")
+    assert m.n_run == 24 and set(m.written) == {str(out), str(tmp_path / "poles.parquet"),
+                                               str(tmp_path / "tracks.failures.csv")}
+    back = load_tracks(out)
+    np.testing.assert_array_equal(back["mode_shape"].values, serial.dataset["mode_shape_real"].values
+                                  + 1j * serial.dataset["mode_shape_imag"].values)
+    assert back["mode_shape"].dtype == complex and back["alarm"].dtype == bool
+    np.testing.assert_array_equal(back["frequency_hz"].values, serial.dataset["frequency_hz"].values)
+    np.testing.assert_array_equal(back["time"].values, serial.dataset["time"].values)
+    import pandas as pd
+
+    assert pd.read_parquet(tmp_path / "poles.parquet").shape == serial.poles.shape
+    pytest.importorskip("zarr")
+    z = monitor(campaign.records, settings=SETTINGS, out=tmp_path / "tracks.zarr", progress=False)
+    np.testing.assert_array_equal(load_tracks(tmp_path / "tracks.zarr")["mode_shape"].values,
+                                  back["mode_shape"].values)
+    assert z.n_run == 0  # the same stem: the part files of tracks.nc serve, nothing is identified again
+
+
+def test_resume_runs_nothing_done_and_refuses_other_settings(campaign, tmp_path):
+    out = tmp_path / "t.nc"
+    first = monitor(campaign.records[:8], settings=SETTINGS, out=out, progress=False,
+                    tracking=TrackingSettings(reference_records=4))
+    parts = sorted((tmp_path / "t.parts").glob("*.json"))
+    stamps = {p: p.stat().st_mtime_ns for p in parts}
+    again = monitor(campaign.records[:12], settings=SETTINGS, out=out, progress=False,
+                    tracking=TrackingSettings(reference_records=4))
+    assert first.n_run == 8 and again.n_run == 4  # only the 4 new records ran
+    assert all(p.stat().st_mtime_ns == t for p, t in stamps.items())
+    np.testing.assert_array_equal(again.dataset["frequency_hz"].values[:8], first.dataset["frequency_hz"].values)
+    with pytest.raises(ValueError, match="other settings"):
+        monitor(campaign.records[:8], settings=SETTINGS.replace(orders=(2, 4, 6, 8)), out=out, progress=False)
+    assert monitor(campaign.records[:8], settings=SETTINGS, out=out, progress=False, resume=False).n_run == 8
+
+
+@pytest.fixture(scope="module")
+def csv_folder(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("records") / "site"
+    camp = simulate_monitoring(20, n_samples=4000, seed=5)
+    camp.write(folder)
+    return folder, camp
+
+
+def test_a_corrupt_file_is_a_failure_with_its_stage_and_the_batch_goes_on(csv_folder, tmp_path):
+    folder, camp = csv_folder
+    bad = tmp_path / "bad"
+    bad.mkdir()
+    (bad / "corrupt.csv").write_text("time,a,b\n0,1,2\n0.1,x,\x00\n")
+    short = bad / "short.csv"
+    np.savetxt(short, np.column_stack([np.arange(30) / 50, np.ones((30, 3))]), delimiter=",", header="t,a,b,c",
+               comments="")
+    files = record_files([folder]) + [bad / "corrupt.csv", short, bad / "missing.csv"]
+    m = monitor(files, settings=SETTINGS, out=tmp_path / "t.nc", progress=False,
+                covariates=folder.with_name("site.covariates.csv"))
+    assert m.n_records == 23 and m.n_failed == 3
+    f = m.failures.set_index("record")
+    assert f.loc["corrupt.csv", "stage"] == "load" and f.loc["missing.csv", "stage"] == "load"
+    assert "missing.csv" in f.loc["missing.csv", "error"]
+    assert f.loc["short.csv", "stage"] in ("preprocess", "identify")
+    assert (m.dataset["status"].values == "done").sum() == 20
+    # the failures table beside the store holds the same rows
+    import pandas as pd
+
+    assert pd.read_csv(tmp_path / "t.failures.csv").shape[0] == 3
+    # covariates and times came from the table beside the folder
+    np.testing.assert_allclose(m.dataset["temperature"].values[:20], camp.temperature, rtol=1e-5)
+
+
+def test_time_from_file_names_and_record_order():
+    assert time_from_name("bridge_2026-03-01_12-30-00.csv") == np.datetime64("2026-03-01T12:30:00")
+    assert time_from_name("acc20260301T1230.h5") == np.datetime64("2026-03-01T12:30:00")
+    assert time_from_name("run1.csv") is None
+
+
+def test_bad_arguments_are_errors_naming_the_parameter(campaign, tmp_path):
+    with pytest.raises(ValueError, match="records"):
+        monitor([], progress=False)
+    with pytest.raises(TypeError, match="records"):
+        monitor([42], progress=False)
+    with pytest.raises(ValueError, match="more than once"):
+        monitor([campaign.records[0], campaign.records[0]], progress=False)
+    with pytest.raises(ValueError, match="out"):
+        monitor(campaign.records[:3], out=tmp_path / "t.txt", progress=False)
+    with pytest.raises(TypeError, match="tracking"):
+        monitor(campaign.records[:3], tracking={"smoothing": 1}, progress=False)
+    with pytest.raises(ValueError, match="at most one of"):
+        monitor(campaign.records[:3], workers=2, scheduler="tcp://localhost:1", progress=False)
+    with pytest.raises(ValueError, match="pattern"):
+        monitor(str(tmp_path / "*.csv"), progress=False)
+
+
+def test_plots_of_the_tracks(serial, tmp_path):
+    fig = serial.plot_frequencies()
+    assert len(fig.axes) == 6
+    fig.savefig(tmp_path / "f.png")
+    fig = serial.plot_control_chart()
+    assert len(fig.axes) == 6 and fig.axes[0].get_yscale() == "log"
+
+
+# ------------------------------------------------------------------------------ command line
+
+
+def test_cli_over_a_folder_of_csv_files(csv_folder, tmp_path, capsys):
+    folder, _ = csv_folder
+    out = tmp_path / "tracks.nc"
+    rc = main(["monitor", str(folder), "--out", str(out), "--orders", "2:24:2", "--reference-records", "10",
+               "--covariates", str(folder.with_name("site.covariates.csv")), "--plot", str(tmp_path / "f.png"),
+               "--threads", "2", "--no-progress"])
+    text = capsys.readouterr().out
+    assert rc == 0, text
+    assert "20 records: 20 identified, 0 failed" in text and out.exists() and (tmp_path / "f.png").exists()
+    ds = load_tracks(out)
+    assert ds["frequency_hz"].dims == ("record", "mode") and ds["alarm"].dims == ("record", "mode")
+    assert ds["alarm"].dtype == bool
+
+
+def test_cli_over_only_bad_files_exits_2_with_a_summary(tmp_path, capsys):
+    bad = tmp_path / "bad"
+    bad.mkdir()
+    for k in range(3):
+        (bad / f"r{k}.csv").write_text("t,a\n0,nan\n0.02,1\n")
+    rc = main(["monitor", str(bad), "--out", str(tmp_path / "t.nc"), "--no-progress"])
+    err = capsys.readouterr().err
+    assert rc == 2
+    assert "3 of 3 records failed (3 at load)" in err and "no record could be identified" in err
+    assert err.count("failed: ") == 3
+    assert main(["monitor", str(bad), "--out", str(tmp_path / "t.txt")]) == 2
+    assert "--out" in capsys.readouterr().err
+
+
+# ------------------------------------------------------------------------------ Dask
+
+
+@pytest.fixture(scope="module")
+def dask_client():
+    distributed = pytest.importorskip("distributed")
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) \
+            as cluster, distributed.Client(cluster) as client:
+        yield client
+
+
+@pytest.mark.slow
+def test_dask_local_cluster_gives_the_serial_results(dask_client, csv_folder, tmp_path):
+    folder, _ = csv_folder
+    files = record_files(folder)
+    cov = folder.with_name("site.covariates.csv")
+    serial = monitor(files, settings=SETTINGS, threads=1, progress=False, covariates=cov)
+    on_dask = monitor(files, settings=SETTINGS, executor=dask_client, progress=False, covariates=cov)
+    assert_same_tracks(serial, on_dask)
+    # a corrupt file among them: reported, the others finish
+    (tmp_path / "corrupt.npz").write_bytes(b"PK\x03\x04 not a zip")
+    m = monitor(files + [tmp_path / "corrupt.npz"], settings=SETTINGS, executor=dask_client, progress=False,
+                covariates=cov)
+    assert m.n_failed == 1 and m.failures.iloc[0]["stage"] == "load"
+    np.testing.assert_array_equal(m.dataset["frequency_hz"].values[:20], serial.dataset["frequency_hz"].values)
+
+
+@pytest.mark.slow
+def test_a_killed_run_restarted_finishes_every_record_exactly_once(tmp_path):
+    pytest.importorskip("distributed")
+    folder = tmp_path / "site"
+    simulate_monitoring(20, n_samples=20000, seed=2).write(folder, format="npz")
+    out = tmp_path / "tracks.nc"
+    cmd = [sys.executable, "-m", "modaluq.cli", "monitor", str(folder), "--out", str(out), "--orders", "2:40:2",
+           "--workers", "2", "--no-progress"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+    parts = tmp_path / "tracks.parts"
+    deadline = time.time() + 120
+    while time.time() < deadline and len(list(parts.glob("*.json"))) < 6:  # settings.json + 5 records
+        time.sleep(0.05)
+    os.killpg(proc.pid, signal.SIGKILL)  # the driver and its workers, mid-run
+    proc.wait()
+    done_before = {p.name: p.read_bytes() for p in parts.glob("*.json") if p.name != "settings.json"}
+    assert 5 <= len(done_before) < 20 and not out.exists()
+    again = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
+    assert again.returncode == 0, again.stderr
+    assert f"({20 - len(done_before)} run now" in again.stdout
+    ds = load_tracks(out)
+    names = list(ds["record"].values)
+    assert sorted(names) == sorted(f"record-{k:04d}.npz" for k in range(20)) and len(set(names)) == 20
+    assert (ds["status"].values == "done").all()
+    # the parts finished before the kill were not run again
+    assert all((parts / n).read_bytes() == b for n, b in done_before.items())
+    assert len([p for p in parts.glob("*.json") if p.name != "settings.json"]) == 20
+    assert not list(parts.glob(".*.tmp"))
+    json.loads((parts / "settings.json").read_text())
