@@ -13,10 +13,11 @@ from matplotlib.patches import FancyArrowPatch, FancyBboxPatch
 
 # (label, modules) from the top layer down: each imports only the layers below it
 PYTHON = [
-    ("command line", "cli/  (identify · demo · validate)"),
+    ("command line", "cli/  (identify · monitor · demo · validate)"),
+    ("monitoring", "monitoring  (monitor: executors, part files, store)"),
     ("plot and export", "plot · export"),
     ("analysis", "analysis · horizons · validation/"),
-    ("selection", "selection"),
+    ("selection, tracking", "selection · tracking"),
     ("stabilization", "stabilization"),
     ("identification", "identification · streaming"),
     ("result types", "results"),
@@ -24,7 +25,7 @@ PYTHON = [
     ("argument checks", "checks"),
     ("C++ core", "_core (pybind11: translation only) · _blas · version"),
 ]
-SIDE = [("side leaves", "io/  (file loaders)\nsimulate"), ]
+SIDE = [("side leaves", "io/  (file loaders)\nsimulate\nmonitoring_simulator"), ]
 CPP = ["covariance.hpp\nlag sums, blocks", "subspace.hpp\nH (OO or IO)", "realization.hpp\nSVD → Γ, A, C",
        "modal.hpp\nf, ξ, shapes", "uncertainty.hpp\nΣ → σ per order", "stabilization.hpp\njudge poles",
        "selection.hpp\ncluster → modes"]

@@ -11,7 +11,7 @@
 # runs on any x86-64/arm64 CPU, so a wheel copied to another machine does not die of SIGILL).
 set -euo pipefail
 cd "$(dirname "$0")/.."
-extras="plot,io,export"
+extras="plot,io,export,monitor"
 apt_pkgs=(g++ make cmake python3-venv python3-dev libeigen3-dev libopenblas-dev)
 if [[ "${1:-}" == "--test" ]]; then
   extras="all"

@@ -12,20 +12,24 @@ mode shape at every model order, computed from one dataset.
 The modules form layers, each importing only those below it (docs/architecture.md):
 ``checks`` → ``settings``, ``preprocess``, ``auto_settings``, ``spectrum``, ``harmonics`` →
 ``results`` → ``identification``, ``streaming`` → ``stabilization`` → ``selection`` →
-``horizons``, ``analysis`` → ``plot``, ``export`` → ``cli``; ``io`` and ``simulate`` are side
-leaves, ``validation`` sits on identification and the simulator.
+``horizons``, ``analysis`` → ``plot``, ``export`` → ``monitoring`` (many records: ``monitor``) →
+``cli``; ``tracking`` sits beside ``selection``; ``io``, ``simulate`` and ``monitoring_simulator``
+are side leaves, ``validation`` sits on identification and the simulator.
 """
 
 from ._core import NumericalError
 from .analysis import Analysis
 from .horizons import HorizonCheck, check_horizons
 from .identification import identify
+from .monitoring import Monitoring, load_tracks, monitor
+from .monitoring_simulator import simulate_monitoring
 from .results import ModalUQWarning, Modes, Result
 from .selection import SelectedModes, select_modes
 from .settings import ClusteringSettings, PoleStatus, Settings, StabilityCriteria
 from .simulate import Simulation, simulate
 from .stabilization import Diagram, modal_assurance_criterion, stabilization_diagram
 from .streaming import CovarianceAccumulator
+from .tracking import TrackingSettings
 from .version import __version__
 
 __all__ = [
@@ -36,6 +40,7 @@ __all__ = [
     "HorizonCheck",
     "ModalUQWarning",
     "Modes",
+    "Monitoring",
     "NumericalError",
     "PoleStatus",
     "Result",
@@ -43,11 +48,15 @@ __all__ = [
     "Settings",
     "Simulation",
     "StabilityCriteria",
+    "TrackingSettings",
     "check_horizons",
     "identify",
+    "load_tracks",
     "modal_assurance_criterion",
+    "monitor",
     "select_modes",
     "simulate",
+    "simulate_monitoring",
     "stabilization_diagram",
     "__version__",
 ]

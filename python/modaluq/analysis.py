@@ -206,11 +206,15 @@ class Analysis:
         return s.max_order(l), (f" = min((p-1)·l, q·r) = min({p - 1}·{l}, {q}·{n_refs}) for block_rows {p}, "
                                 f"past_block_rows {q}, {l} outputs and {n_refs} references")
 
-    def run(self, *, check_horizons: bool = False, progress: Callable[[str], None] | None = None) -> "Analysis":
+    def run(self, *, check_horizons: bool = False, check_harmonics: bool = True,
+            progress: Callable[[str], None] | None = None) -> "Analysis":
         """Identify, form the diagram, select the modes (and check the horizons); returns self.
 
-        ``progress`` is called with the name of each step before it starts. The
-        identification's warnings are kept in :attr:`warnings` and issued again.
+        ``check_harmonics``: flag the selected modes that may be harmonics of the excitation
+        (:mod:`modaluq.harmonics`; it filters the record around each mode, which costs about as
+        much as the identification of a long many-channel record). ``progress`` is called with
+        the name of each step before it starts. The identification's warnings are kept in
+        :attr:`warnings` and issued again.
         """
         step = progress or (lambda _: None)
         pre = self.preprocess()
@@ -231,10 +235,10 @@ class Analysis:
         step("clustering")
         self.selected = select_modes(self.diagram, self.clustering)
         # rotating machinery: kurtosis of the response filtered around each mode (harmonics.py)
-        if self.selected.n_modes:
+        if check_boolean("check_harmonics", check_harmonics) and self.selected.n_modes:
             self.harmonic_kurtosis = harmonic_kurtosis(pre.y, pre.fs, self.selected.frequency_hz)
             self.possible_harmonic = possible_harmonics(pre.y, pre.fs, self.selected.frequency_hz,
-                                                        self.selected.damping_ratio)
+                                                        self.selected.damping_ratio, kurtosis=self.harmonic_kurtosis)
         if check_boolean("check_horizons", check_horizons) and self.selected.n_modes:
             # the same record at 0.75, 1 and 1.5 times the horizon: a bias from the horizon
             # does not show in σ, but in how the estimate moves (horizons.py)

@@ -81,12 +81,13 @@ def harmonic_kurtosis(y, fs: float, frequencies_hz, *, relative_bandwidth: float
 
 
 def possible_harmonics(y, fs: float, frequencies_hz, damping_ratio=None, *, threshold: float = HARMONIC_KURTOSIS,
-                       relative_bandwidth: float = 0.02) -> np.ndarray:
+                       relative_bandwidth: float = 0.02, kurtosis=None) -> np.ndarray:
     """Which frequencies look like harmonics: kurtosis of the filtered response below ``threshold``;
     or (when ``damping_ratio`` is given) below LIGHT_DAMPING_KURTOSIS for a pole with a damping
     ratio below LIGHT_DAMPING that lies at 2 to 10 times a frequency flagged by the first rule
     (within FAMILY_TOLERANCE). A flag to look at the spectrum and the machine's speed, not a
-    verdict: the kurtosis of a short record is itself uncertain.
+    verdict: the kurtosis of a short record is itself uncertain. ``kurtosis``: the values of
+    :func:`harmonic_kurtosis` for these frequencies when already computed (they are not again).
 
     Examples
     --------
@@ -98,7 +99,9 @@ def possible_harmonics(y, fs: float, frequencies_hz, damping_ratio=None, *, thre
     [True, False]
     """
     threshold = check_real("threshold", threshold, low=1, high=3)
-    k = harmonic_kurtosis(y, fs, frequencies_hz, relative_bandwidth=relative_bandwidth)
+    if kurtosis is None:
+        kurtosis = harmonic_kurtosis(y, fs, frequencies_hz, relative_bandwidth=relative_bandwidth)
+    k = np.asarray(kurtosis, dtype=float)
     flag = np.isfinite(k) & (k < threshold)
     if damping_ratio is not None:
         f = np.atleast_1d(np.asarray(frequencies_hz, dtype=float))

@@ -312,7 +312,7 @@ def plot_tracked_frequencies(ds, fig=None, *, modes=None, figsize=None):
     """Each tracked mode's frequency against time (one panel per mode), with its ±σ band, the
     reference's prediction, the reference period shaded and the alarms marked.
 
-    ``ds`` is :attr:`modaluq.monitor.Monitoring.dataset` (or :func:`modaluq.monitor.load_tracks`);
+    ``ds`` is :attr:`modaluq.monitoring.Monitoring.dataset` (or :func:`modaluq.monitoring.load_tracks`);
     ``modes`` the 1-based modes to draw (default all).
     """
     modes = list(ds["mode"].values) if modes is None else [check_integer("modes", m, minimum=1) for m in modes]

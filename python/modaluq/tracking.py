@@ -236,24 +236,27 @@ def assignment_cost(modes: RecordModes, ref: ReferenceModes) -> tuple:
     """``(cost, mac)``, each (m, k): the Mahalanobis distance² of every record mode to every
     reference mode (f, ξ and the aligned shape), and their MAC."""
     m, k = modes.n_modes, ref.n_modes
-    cost = np.zeros((m, k))
-    mac = modal_assurance_criterion(modes.mode_shape, ref.mode_shape) if m and k else np.zeros((m, k))
+    if not (m and k):
+        return np.zeros((m, k)), np.zeros((m, k))
+    mac = modal_assurance_criterion(modes.mode_shape, ref.mode_shape)
 
-    def var(*parts):
+    def var(*parts):  # a missing σ (NaN) adds nothing
         return sum(np.nan_to_num(p) ** 2 for p in parts)
 
-    for i in range(m):
-        vf = var(modes.frequency_std[i], ref.frequency_std, ref.frequency_scatter)
-        vx = var(modes.damping_std[i], ref.damping_std, ref.damping_scatter)
-        vf = np.maximum(vf, (1e-4 * ref.frequency_hz) ** 2)  # no σ at all: distances in 0.01 % of f
-        vx = np.maximum(vx, 1e-8)
-        cost[i] = ((modes.frequency_hz[i] - ref.frequency_hz) ** 2 / vf
-                   + (modes.damping_ratio[i] - ref.damping_ratio) ** 2 / vx)
-        sigma_i = np.hypot(modes.mode_shape_std_real[:, i], modes.mode_shape_std_imag[:, i])
-        for j in range(k):
-            aligned, scale = _align(modes.mode_shape[:, i], ref.mode_shape[:, j])
-            v = var(scale * sigma_i, ref.mode_shape_std[:, j], ref.mode_shape_scatter[:, j]) + SHAPE_VARIANCE_FLOOR
-            cost[i, j] += float(np.sum(np.abs(aligned - ref.mode_shape[:, j]) ** 2 / v))
+    vf = var(modes.frequency_std[:, None], ref.frequency_std, ref.frequency_scatter)
+    vx = var(modes.damping_std[:, None], ref.damping_std, ref.damping_scatter)
+    vf = np.maximum(vf, (1e-4 * ref.frequency_hz) ** 2)  # no σ at all: distances in 0.01 % of f
+    vx = np.maximum(vx, 1e-8)
+    cost = ((modes.frequency_hz[:, None] - ref.frequency_hz) ** 2 / vf
+            + (modes.damping_ratio[:, None] - ref.damping_ratio) ** 2 / vx)
+    # shapes: record mode i scaled by the complex α_ij that brings it nearest reference mode j
+    phi, target = modes.mode_shape, ref.mode_shape                        # (l, m), (l, k)
+    alpha = (phi.conj().T @ target) / np.maximum(np.sum(np.abs(phi) ** 2, axis=0), 1e-300)[:, None]
+    aligned = alpha[None, :, :] * phi[:, :, None]                         # (l, m, k)
+    sigma = np.hypot(modes.mode_shape_std_real, modes.mode_shape_std_imag)  # (l, m)
+    v = (var(np.abs(alpha)[None, :, :] * sigma[:, :, None], ref.mode_shape_std[:, None, :],
+             ref.mode_shape_scatter[:, None, :]) + SHAPE_VARIANCE_FLOOR)
+    cost += np.sum(np.abs(aligned - target[:, None, :]) ** 2 / v, axis=0)
     return cost, mac
 
 
@@ -298,7 +301,7 @@ class ChangeTest:
 
 def change_test(frequency, damping, covariance, reference, covariates=None,
                 settings: TrackingSettings | None = None, dof=None) -> ChangeTest:
-    """The change test of every tracked mode (docs/monitoring.md §3).
+    """The change test of every tracked mode (docs/monitoring.md §4).
 
     Parameters
     ----------
@@ -323,8 +326,7 @@ def change_test(frequency, damping, covariance, reference, covariates=None,
     p = D.shape[1]
     nan = np.full((n_rec, n_modes), np.nan)
     out = {k: nan.copy() for k in ("ef", "ex", "zf", "zx", "chi2", "control")}
-    alarm = np.zeros((n_rec, n_modes), bool)
-    limit = nan.copy()
+    limit_dof = nan.copy()  # degrees of freedom of each control statistic's covariance
     nu = np.full(n_rec, np.inf) if dof is None else np.asarray(dof, float).reshape(n_rec)
     red, red_f, red_x = (np.full(n_modes, np.nan) for _ in range(3))
     bf, bx = np.full((n_modes, p), np.nan), np.full((n_modes, p), np.nan)
@@ -385,8 +387,12 @@ def change_test(frequency, damping, covariance, reference, covariates=None,
             out["control"][k, j] = float(V @ np.linalg.solve(SV, V))
             w2 = lam**2 + (1 - lam) ** 2 * w2
             w4_nu = lam**4 / nu[k] + (1 - lam) ** 4 * w4_nu
-            limit[k, j] = alarm_limit(s.false_alarm_rate, w2**2 / w4_nu if w4_nu > 0 else np.inf)
-            alarm[k, j] = out["control"][k, j] > limit[k, j]
+            limit_dof[k, j] = w2**2 / w4_nu if w4_nu > 0 else np.inf
+    charted = ~np.isnan(limit_dof)
+    limit = nan.copy()
+    limit[charted] = alarm_limit(s.false_alarm_rate, limit_dof[charted])  # one vectorised call
+    alarm = np.zeros((n_rec, n_modes), bool)
+    alarm[charted] = out["control"][charted] > limit[charted]
     return ChangeTest(expected_frequency_hz=expected_f, expected_damping_ratio=expected_x,
                       frequency_change=out["zf"], damping_change=out["zx"], chi2=out["chi2"], control=out["control"],
                       alarm=alarm, control_limit=limit, reference_reduced_chi2=red,

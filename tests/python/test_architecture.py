@@ -30,7 +30,7 @@ LAYERS = {
     "modaluq.selection": 6, "modaluq.tracking": 6,
     "modaluq.horizons": 7, "modaluq.analysis": 7, "modaluq.validation.*": 7,
     "modaluq.plot": 8, "modaluq.export": 8,
-    "modaluq.monitor": 9,  # many records: analysis, tracking, plots and stores
+    "modaluq.monitoring": 9,  # many records: analysis, tracking, plots and stores
     "modaluq.cli.*": 10,
     "modaluq": 11,  # the package's namespace: re-exports the public API
 }

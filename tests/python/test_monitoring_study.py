@@ -10,7 +10,7 @@ import scipy.optimize
 import scipy.stats
 
 import modaluq
-from modaluq.monitor import monitor
+from modaluq.monitoring import monitor
 from modaluq.monitoring_simulator import simulate_monitoring
 from modaluq.simulate import chain_system, modal_parameters
 from modaluq.tracking import TrackingSettings

@@ -8,8 +8,7 @@ import numpy as np
 import pytest
 import scipy.stats
 
-from modaluq.tracking import (RecordModes, TrackingSettings, alarm_limit, assign, change_test,
-                              reference_modes)
+from modaluq.tracking import RecordModes, TrackingSettings, alarm_limit, assign, change_test, reference_modes
 
 TRUE_F = np.array([2.0, 5.0, 5.1, 9.0])      # 5.0 and 5.1 are 2 % apart
 TRUE_XI = np.array([0.02, 0.015, 0.03, 0.01])

@@ -1,6 +1,6 @@
 """``modaluq monitor``: many records → tracked modes with σ, change statistics and alarms.
 
-Option translation over :func:`modaluq.monitor.monitor`; the preprocessing, identification and
+Option translation over :func:`modaluq.monitoring.monitor`; the preprocessing, identification and
 selection options are those of ``modaluq identify``. Failures are listed on stderr (and in
 ``<stem>.failures.csv``); the exit status is 2 when no record could be identified.
 """
@@ -12,7 +12,7 @@ import sys
 import warnings
 from pathlib import Path
 
-from ..monitor import monitor
+from ..monitoring import monitor
 from ..tracking import TrackingSettings
 from ..version import __version__
 from .common import CliError, integer_option, option_error, real_option
@@ -48,7 +48,8 @@ def run(args) -> int:
             result = monitor(args.paths, out=args.out, settings=settings, criteria=criteria, clustering=clustering,
                              tracking=tracking, covariates=args.covariates, fs=args.fs, format=args.format,
                              read_options=parse_read_options(args.read_option), outputs=args.outputs,
-                             inputs=args.inputs, references=args.references, threads=args.threads,
+                             inputs=args.inputs, references=args.references,
+                             check_harmonics=args.check_harmonics, threads=args.threads,
                              workers=args.workers, scheduler=args.scheduler, resume=not args.no_resume,
                              poles=args.poles, progress=False if args.no_progress else None)
     except ValueError as exc:
@@ -124,6 +125,8 @@ def register(subparsers) -> argparse.ArgumentParser:
                         "tested on its own)")
     g.add_argument("--tracking-min-mac", type=real_option(0, 1, low_open=False), default=0.8, metavar="MAC",
                    help="smallest MAC between a record's mode and a reference mode (default 0.8)")
+    g.add_argument("--check-harmonics", action="store_true",
+                   help="flag modes that may be harmonics of the excitation (costs about one more identification)")
     g.add_argument("--inflate-to-reference", action="store_true",
                    help="scale each mode's sigma up to its reduced chi2 in the reference period when that is above 1")
     g = p.add_argument_group("execution")

@@ -39,6 +39,7 @@ from pathlib import Path
 from typing import Optional
 
 import numpy as np
+import scipy.stats
 
 from ._blas import single_threaded
 from .analysis import Analysis
@@ -117,11 +118,13 @@ class TaskConfig:
     criteria: StabilityCriteria = field(default_factory=StabilityCriteria)
     clustering: ClusteringSettings = field(default_factory=ClusteringSettings)
     read: dict = field(default_factory=dict)  #: fs, format, read_options, outputs, inputs, references
-    one_blas_thread: bool = False             #: set in a worker process (Dask, process pools)
+    check_harmonics: bool = False             #: flag modes that may be harmonics (costs about an identification)
+    worker_process: bool = False              #: the task runs in a worker process (Dask, process pools)
 
     def fingerprint(self) -> dict:
         return {"modaluq": __version__, "settings": self.settings.to_dict(), "criteria": self.criteria.to_dict(),
-                "clustering": self.clustering.to_dict(), "read": _jsonable(self.read)}
+                "clustering": self.clustering.to_dict(), "read": _jsonable(self.read),
+                "check_harmonics": self.check_harmonics}
 
 
 def _tasks(records, covariates) -> list:
@@ -211,10 +214,8 @@ def process_record(task: RecordTask, config: TaskConfig) -> dict:
     stage = "load"
     out = {"key": task.key, "name": task.name, "status": "failed", "stage": "", "error": "", "warnings": []}
     try:
-        if config.one_blas_thread:  # a worker process of its own: this setting stays for its tasks
-            from threadpoolctl import threadpool_limits
-
-            threadpool_limits(1, user_api="blas")
+        if config.worker_process:
+            _configure_worker_process()
         analysis = _analysis(task, config)
         stage = "preprocess"
         analysis.preprocess()
@@ -225,7 +226,7 @@ def process_record(task: RecordTask, config: TaskConfig) -> dict:
 
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # kept, as text, in analysis.warnings
-            analysis.run(progress=step)
+            analysis.run(check_harmonics=config.check_harmonics, progress=step)
         stage = "select"
         out.update(_modes_of(analysis))
         out.update(status="done", stage="", warnings=list(analysis.warnings))
@@ -237,6 +238,35 @@ def process_record(task: RecordTask, config: TaskConfig) -> dict:
             out["traceback"] = traceback.format_exc(limit=6)
     out["seconds"] = time.perf_counter() - t0
     return out
+
+
+#: glibc ``mallopt`` parameters and the values a worker process gets (see _configure_worker_process)
+_M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD = -1, -3
+WORKER_MMAP_THRESHOLD = 32 << 20
+WORKER_TRIM_THRESHOLD = 64 << 20
+
+
+def _configure_worker_process() -> None:
+    """One BLAS thread, and glibc's allocator tuned for the core's large temporaries; for the
+    whole worker process (these settings stay for its later tasks, which is what we want).
+
+    Dask's nanny starts workers with ``MALLOC_TRIM_THRESHOLD_=65536``. In glibc that also freezes
+    the mmap threshold at 128 KiB, so every large temporary of an identification is a fresh
+    ``mmap`` whose pages fault in again: a record then took 1.14 s instead of 0.83 s here.
+    glibc's own dynamic maximum of the mmap threshold (32 MiB) restores the speed; a trim
+    threshold of 64 MiB still returns memory to the system after a record (docs/monitoring.md §2).
+    """
+    from threadpoolctl import threadpool_limits
+
+    threadpool_limits(1, user_api="blas")
+    if sys.platform.startswith("linux"):
+        import ctypes
+        import ctypes.util
+
+        with contextlib.suppress(OSError, AttributeError, TypeError):  # not glibc (musl): nothing to tune
+            libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
+            libc.mallopt(_M_MMAP_THRESHOLD, WORKER_MMAP_THRESHOLD)
+            libc.mallopt(_M_TRIM_THRESHOLD, WORKER_TRIM_THRESHOLD)
 
 
 def _analysis(task: RecordTask, config: TaskConfig) -> Analysis:
@@ -283,6 +313,8 @@ def _modes_of(analysis: Analysis) -> dict:
             "frequency_damping_correlation": rho, "mode_shape": sel.mode_shape,
             "mode_shape_std_real": sel.mode_shape_std_real, "mode_shape_std_imag": sel.mode_shape_std_imag,
             "n_poles": sel.n_poles, "representative_order": sel.representative_order,
+            "possible_harmonic": (analysis.possible_harmonic if analysis.possible_harmonic.size == m
+                                  else np.zeros(m, bool)),
         },
         "poles": {
             "selected_mode": pole_mode, "order": d.order[pole_index],
@@ -302,6 +334,7 @@ class _Parts:
     def __init__(self, folder: Path, config: TaskConfig):
         self.folder = folder
         folder.mkdir(parents=True, exist_ok=True)
+        _remove_stale_temporaries(folder)
         stamp = folder / "settings.json"
         fingerprint = json.loads(json.dumps(config.fingerprint()))
         if stamp.exists():
@@ -326,8 +359,34 @@ class _Parts:
             return None  # absent (or, impossibly with atomic writes, torn): run it again
         return part if part.get("key") == key else None
 
-    def write(self, part: dict) -> None:
-        _atomic_write(self.path(part["key"]), json.dumps(_jsonable(part)).encode())
+    def write(self, key: str, text: str) -> None:
+        """Write the part of ``key`` (``text``: its JSON)."""
+        _atomic_write(self.path(key), text.encode())
+
+
+def _remove_stale_temporaries(folder: Path) -> None:
+    """Delete the half-written ``.<part>.<pid>.tmp`` files of writers that were killed: their
+    records have no part and run again. A file of a process still alive on this machine is kept
+    (two runs on one store are not supported, but one must not break the other's write)."""
+    for tmp in folder.glob(".*.tmp"):
+        try:
+            pid = int(tmp.name.rsplit(".", 2)[-2])
+        except ValueError:
+            pid = None
+        if pid is not None and pid != os.getpid() and _process_alive(pid):
+            continue
+        with contextlib.suppress(OSError):
+            tmp.unlink()
+
+
+def _process_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except (PermissionError, OSError):
+        return True  # exists, another user's
+    return True
 
 
 def _atomic_write(path: Path, data: bytes) -> None:
@@ -463,22 +522,31 @@ class Monitoring:
                      f"EWMA weight {self.tracking.smoothing:g})")
         lines.append(" mode  f_ref [Hz]  xi_ref [%]  found   reduced chi2 (f, xi)   alarms after the reference")
         after = ~ref & (ds["status"].values == "done")
+        # a reduced χ² above its 99.9 % quantile: σ too small on this structure, or a covariate missing
+        dof = max(int(ref.sum()) - ds.sizes.get("term", 1), 1)
+        high = scipy.stats.chi2.isf(0.001, dof) / dof
+        flagged = 0
         for j in range(ds.sizes["mode"]):
             found = np.isfinite(ds["frequency_hz"].values[:, j])
             n_alarm = int(ds["alarm"].values[after, j].sum())
+            red = (ds["reference_reduced_chi2_frequency"].values[j], ds["reference_reduced_chi2_damping"].values[j])
+            flag = " !" if max(red) > high else ""
+            flagged += bool(flag)
             lines.append(f" {j + 1:4d}  {ds['reference_frequency_hz'].values[j]:10.4f}  "
                          f"{100 * ds['reference_damping_ratio'].values[j]:10.3f}  {int(found.sum()):5d}   "
-                         f"{ds['reference_reduced_chi2_frequency'].values[j]:9.2f} "
-                         f"{ds['reference_reduced_chi2_damping'].values[j]:9.2f}    "
-                         f"{n_alarm:5d} of {int((after & found).sum())}")
+                         f"{red[0]:9.2f} {red[1]:9.2f}{flag:2s}  {n_alarm:5d} of {int((after & found).sum())}")
+        if flagged:
+            lines.append(f" !: reduced chi2 above {high:.2f} (its 99.9 % quantile): sigma is too small on this "
+                         "structure or a covariate (temperature ...) is missing; alarms are then too frequent "
+                         "(docs/monitoring.md §4: inflate_to_reference)")
         return "\n".join(lines)
 
 
 def monitor(records, *, out=None, settings: Settings | None = None, criteria: StabilityCriteria | None = None,
             clustering: ClusteringSettings | None = None, tracking: TrackingSettings | None = None,
             covariates=None, fs: float | None = None, format: str | None = None, read_options: dict | None = None,
-            outputs=None, inputs=None, references=None, executor=None, threads: int | None = None,
-            workers: int | None = None, scheduler: str | None = None, resume: bool = True,
+            outputs=None, inputs=None, references=None, check_harmonics: bool = False, executor=None,
+            threads: int | None = None, workers: int | None = None, scheduler: str | None = None, resume: bool = True,
             poles=None, progress: bool | None = None) -> Monitoring:
     """Identify every record, track the modes, test their changes (docs/monitoring.md).
 
@@ -504,6 +572,9 @@ def monitor(records, *, out=None, settings: Settings | None = None, criteria: St
         ``time`` column, and numeric columns (temperature, ...) the change test regresses on.
     fs, format, read_options, outputs, inputs, references :
         How files are read and which channels are used (:meth:`~modaluq.Analysis.from_file`).
+    check_harmonics : bool, default False
+        Flag the modes that may be harmonics of the excitation (``possible_harmonic``); it filters
+        each record around each mode, about the cost of the identification itself.
     executor, threads, workers, scheduler :
         Where the records run: by default a pool of ``threads`` threads (default: the cores)
         in this process, or an active Dask client; ``executor=`` a
@@ -524,6 +595,7 @@ def monitor(records, *, out=None, settings: Settings | None = None, criteria: St
     config = TaskConfig(settings=_typed(settings, Settings, "settings"),
                         criteria=_typed(criteria, StabilityCriteria, "criteria"),
                         clustering=_typed(clustering, ClusteringSettings, "clustering"),
+                        check_harmonics=check_boolean("check_harmonics", check_harmonics),
                         read={k: v for k, v in dict(fs=fs, format=format, read_options=read_options, outputs=outputs,
                                                     inputs=inputs, references=references).items() if v is not None})
     out_paths = _output_paths(out, poles)
@@ -545,7 +617,7 @@ def monitor(records, *, out=None, settings: Settings | None = None, criteria: St
                    file=sys.stderr, disable=None if progress is None else not progress, smoothing=0.05)
         with bar, _executor(executor, threads, workers, scheduler) as (pool, remote), \
                 (contextlib.nullcontext() if remote else single_threaded()):
-            cfg = dataclasses.replace(config, one_blas_thread=remote)
+            cfg = dataclasses.replace(config, worker_process=remote)
             futures = {pool.submit(process_record, task, cfg): task for task in todo}
             n_failed = 0
             for fut in concurrent.futures.as_completed(futures):
@@ -559,9 +631,10 @@ def monitor(records, *, out=None, settings: Settings | None = None, criteria: St
                             "error": f"{type(exc).__name__}: {' '.join(str(exc).split())}", "warnings": []}
                 part.update(time=None if task.time is None else str(task.time), covariates=task.covariates,
                             source=task.source if isinstance(task.source, str) else task.name)
-                part = json.loads(json.dumps(_jsonable(part)))  # the same values whether read back or not
+                text = json.dumps(_jsonable(part))
+                part = json.loads(text)  # the same values whether read back from a part or not
                 if parts is not None:
-                    parts.write(part)
+                    parts.write(part["key"], text)
                 results[task.key] = part
                 n_failed += part["status"] != "done"
                 bar.set_postfix_str(f"{n_failed} failed", refresh=False)
@@ -649,6 +722,7 @@ def _consolidate(tasks, parts, tracking: TrackingSettings) -> Monitoring:
     l = len(channels)
     F = np.full((n, k_modes), np.nan)
     XI, SF, SX, RHO, MAC, DIST, NP = (np.full((n, k_modes), np.nan) for _ in range(7))
+    HARM = np.zeros((n, k_modes), bool)
     SH = np.full((n, l, k_modes), np.nan + 0j)
     SHR, SHI = np.full((n, l, k_modes), np.nan), np.full((n, l, k_modes), np.nan)
     n_unassigned = np.zeros(n, int)
@@ -667,6 +741,7 @@ def _consolidate(tasks, parts, tracking: TrackingSettings) -> Monitoring:
             SF[k, j], SX[k, j], RHO[k, j] = mk.frequency_std[i], mk.damping_std[i], mk.frequency_damping_correlation[i]
             MAC[k, j], DIST[k, j] = mac[i], dist[i]
             NP[k, j] = parts[k]["modes"]["n_poles"][i]
+            HARM[k, j] = bool(parts[k]["modes"].get("possible_harmonic", [False] * mk.n_modes)[i])
             SH[k, :, j] = mk.mode_shape[:, i]
             SHR[k, :, j], SHI[k, :, j] = mk.mode_shape_std_real[:, i], mk.mode_shape_std_imag[:, i]
     C = np.zeros((n, k_modes, 2, 2))
@@ -691,7 +766,7 @@ def _consolidate(tasks, parts, tracking: TrackingSettings) -> Monitoring:
         "frequency_std": (rm, SF, {"units": "Hz"}), "damping_std": (rm, SX, {"units": "1"}),
         "frequency_damping_correlation": (rm, RHO), "mac_to_reference": (rm, MAC),
         "assignment_distance": (rm, DIST, {"long_name": "Mahalanobis distance squared to the reference mode"}),
-        "n_poles": (rm, NP),
+        "n_poles": (rm, NP), "possible_harmonic": (rm, HARM),
         "mode_shape_real": (rcm, SH.real), "mode_shape_imag": (rcm, SH.imag),
         "mode_shape_std_real": (rcm, SHR), "mode_shape_std_imag": (rcm, SHI),
     }
@@ -769,8 +844,12 @@ def _write(result: Monitoring, paths: dict) -> tuple:
     else:
         import shutil
 
-        # Zarr format 2: its string arrays (record names, status) are specified, readable by every Zarr library
-        ds.to_zarr(tmp, mode="w", zarr_format=2, consolidated=True)
+        import zarr
+
+        # Zarr format 2 (the only one of zarr < 3): its string arrays (record names, status) are
+        # specified and readable by every Zarr library; zarr 3 warns that its own v3 strings are not
+        fmt = {"zarr_format": 2} if int(zarr.__version__.split(".")[0]) >= 3 else {}
+        ds.to_zarr(tmp, mode="w", consolidated=True, **fmt)
         if store.exists():
             shutil.rmtree(store)
         os.replace(tmp, store)
