@@ -308,6 +308,22 @@ def _time_axis(ds):
     return np.arange(ds.sizes["record"]), "record"
 
 
+def _finish_track_axes(axes, xlabel: str, ncol: int) -> None:
+    """One legend of every panel's entries (an alarm may be in any panel) and readable dates."""
+    entries = {}
+    for ax in axes:
+        for handle, label in zip(*ax.get_legend_handles_labels()):
+            entries.setdefault(label, handle)
+    axes[0].legend(entries.values(), entries.keys(), loc="upper left", fontsize="small", ncol=ncol, framealpha=0.9)
+    if xlabel == "time":  # full dates overlap on a multi-day axis: only what changes between ticks
+        import matplotlib.dates as mdates
+
+        locator = mdates.AutoDateLocator()
+        axes[-1].xaxis.set_major_locator(locator)
+        axes[-1].xaxis.set_major_formatter(mdates.ConciseDateFormatter(locator))
+    axes[-1].set_xlabel(xlabel)
+
+
 def plot_tracked_frequencies(ds, fig=None, *, modes=None, figsize=None):
     """Each tracked mode's frequency against time (one panel per mode), with its ±σ band, the
     reference's prediction, the reference period shaded and the alarms marked.
@@ -340,8 +356,7 @@ def plot_tracked_frequencies(ds, fig=None, *, modes=None, figsize=None):
             ax.plot(x[alarm], f[alarm], "v", color="tab:red", ms=5, label="alarm")
         ax.set_ylabel(f"mode {mode}\nf [Hz]")
         ax.grid(alpha=0.3)
-    axes[0].legend(loc="upper left", fontsize="small", ncol=5, framealpha=0.9)
-    axes[-1].set_xlabel(xlabel)
+    _finish_track_axes(axes, xlabel, ncol=5)
     fig.suptitle("tracked frequencies (alarm: control statistic above the limit of "
                  f"{ds.attrs.get('false_alarm_rate', float('nan')):g} false alarms per record)", fontsize="medium")
     return fig
@@ -349,7 +364,7 @@ def plot_tracked_frequencies(ds, fig=None, *, modes=None, figsize=None):
 
 def plot_control_chart(ds, fig=None, *, modes=None, figsize=None):
     """The control statistic (χ² with 2 degrees of freedom when nothing changed) of each tracked
-    mode against time, with the alarm limit; the standardised frequency change beside it."""
+    mode against time, with the alarm limit and each record's own χ² (2 degrees of freedom)."""
     modes = list(ds["mode"].values) if modes is None else [check_integer("modes", m, minimum=1) for m in modes]
     n = max(len(modes), 1)
     if fig is None:
@@ -373,7 +388,6 @@ def plot_control_chart(ds, fig=None, *, modes=None, figsize=None):
         top = np.nanmax(np.concatenate([c, limit]), initial=10.0) if np.isfinite(limit).any() else 10.0
         ax.set_ylim(1e-2, 2 * top)
         ax.grid(alpha=0.3, which="major")
-    axes[0].legend(loc="upper left", fontsize="small", ncol=4, framealpha=0.9)
-    axes[-1].set_xlabel(xlabel)
+    _finish_track_axes(axes, xlabel, ncol=4)
     fig.suptitle("control chart (multivariate EWMA of f and ξ against the reference)", fontsize="medium")
     return fig
