@@ -331,12 +331,15 @@ def _modes_of(analysis: Analysis) -> dict:
 class _Parts:
     """One file per record in ``folder``, written atomically; ``settings.json`` guards the mix."""
 
-    def __init__(self, folder: Path, config: TaskConfig):
+    def __init__(self, folder: Path, config: TaskConfig, start_again: bool = False):
         self.folder = folder
         folder.mkdir(parents=True, exist_ok=True)
         _remove_stale_temporaries(folder)
         stamp = folder / "settings.json"
         fingerprint = json.loads(json.dumps(config.fingerprint()))
+        if start_again:  # resume=False: the parts of earlier runs (perhaps other settings) are dropped
+            for old in folder.glob("*.json"):
+                old.unlink()
         if stamp.exists():
             try:
                 previous = json.loads(stamp.read_text())
@@ -515,6 +518,13 @@ class Monitoring:
             lines.append("no tracking: " + ds.attrs.get("tracking_error", "no reference modes"))
             return "\n".join(lines)
         ref = ds["in_reference"].values
+        if "control" not in ds:  # tracked, but the change test could not be made
+            lines.append(f"reference: {int(ref.sum())} records; {ds.attrs.get('tracking_error', '')}")
+            lines.append(" mode  f_ref [Hz]  found")
+            for j in range(ds.sizes["mode"]):
+                found = int(np.isfinite(ds["frequency_hz"].values[:, j]).sum())
+                lines.append(f" {j + 1:4d}  {ds['reference_frequency_hz'].values[j]:10.4f}  {found:5d}")
+            return "\n".join(lines)
         limits = ds["control_limit"].values if "control_limit" in ds else np.zeros(0)
         shown = f"{np.nanmedian(limits):.2f}" if np.isfinite(limits).any() else "none"
         lines.append(f"reference: {int(ref.sum())} records; alarms at a false-alarm rate of "
@@ -581,7 +591,8 @@ def monitor(records, *, out=None, settings: Settings | None = None, criteria: St
         :class:`concurrent.futures.Executor` or a ``dask.distributed.Client``; ``workers=N`` a
         Dask ``LocalCluster`` of N one-thread processes; ``scheduler="tcp://host:port"``.
     resume : bool, default True
-        Skip the records whose part file says they are done (failed ones are run again).
+        Skip the records whose part file says they are done (failed ones are run again). False:
+        start again, the part files of earlier runs (whatever their settings) are removed first.
     progress : bool, optional
         A progress bar on stderr (default: when stderr is a terminal).
 
@@ -600,7 +611,7 @@ def monitor(records, *, out=None, settings: Settings | None = None, criteria: St
                                                     inputs=inputs, references=references).items() if v is not None})
     out_paths = _output_paths(out, poles)
     tasks = _tasks(records, covariates)
-    parts = _Parts(out_paths["parts"], config) if out_paths else None
+    parts = _Parts(out_paths["parts"], config, start_again=not resume) if out_paths else None
 
     results = {}
     if parts is not None and resume:
@@ -615,11 +626,14 @@ def monitor(records, *, out=None, settings: Settings | None = None, criteria: St
 
         bar = tqdm(total=len(tasks), initial=len(tasks) - len(todo), desc="records", unit="record",
                    file=sys.stderr, disable=None if progress is None else not progress, smoothing=0.05)
-        with bar, _executor(executor, threads, workers, scheduler) as (pool, remote), \
-                (contextlib.nullcontext() if remote else single_threaded()):
+        # the records' warnings are caught per task (analysis.warnings); on the thread pool these
+        # catches interleave and could leave the caller's filters changed: restore them after the run
+        with bar, warnings.catch_warnings(), _executor(executor, threads, workers, scheduler) as (pool, remote), \
+                (contextlib.nullcontext() if remote else single_threaded()), contextlib.ExitStack() as stack:
             cfg = dataclasses.replace(config, worker_process=remote)
             futures = {pool.submit(process_record, task, cfg): task for task in todo}
             n_failed = 0
+            stack.callback(_cancel, futures)  # Ctrl-C or a failed write: the queued records are not run
             for fut in concurrent.futures.as_completed(futures):
                 task = futures[fut]
                 try:
@@ -646,6 +660,12 @@ def monitor(records, *, out=None, settings: Settings | None = None, criteria: St
         result.written = _write(result, out_paths)
     result.seconds = time.perf_counter() - t0
     return result
+
+
+def _cancel(futures) -> None:
+    """Cancel the futures not yet started (those done or running are left alone)."""
+    for fut in futures:
+        fut.cancel()
 
 
 def _typed(value, cls, parameter):
@@ -750,7 +770,12 @@ def _consolidate(tasks, parts, tracking: TrackingSettings) -> Monitoring:
     # the covariance of a record's [f, ξ] is a sample covariance over its blocks: n_blocks - 1 dof
     dof = np.array([p.get("n_blocks", 0) - 1 if done[k] and p.get("n_blocks", 0) > 1 else np.inf
                     for k, p in enumerate(parts)], float)
-    test = change_test(F, XI, C, in_ref, X if cov_names else None, tracking, dof=dof) if ref is not None else None
+    test = None
+    if ref is not None:
+        try:
+            test = change_test(F, XI, C, in_ref, X if cov_names else None, tracking, dof=dof)
+        except ValueError as exc:  # the records stay identified and tracked; only the test is missing
+            error = f"no change test: {exc}"
 
     rec_dims, rm, rcm = ("record",), ("record", "mode"), ("record", "channel", "mode")
     data = {
@@ -779,16 +804,9 @@ def _consolidate(tasks, parts, tracking: TrackingSettings) -> Monitoring:
             "frequency_change": (rm, test.frequency_change, {"long_name": "standardised frequency change"}),
             "damping_change": (rm, test.damping_change, {"long_name": "standardised damping change"}),
             "chi2": (rm, test.chi2, {"long_name": "chi-squared of f and xi against the reference (2 dof)"}),
-            "control": (rm, test.control, {"long_name": "MEWMA control statistic (chi-squared, 2 dof)"}),
+            "control": (rm, test.control, {"long_name": "MEWMA control statistic (Hotelling T2 of f and xi)"}),
             "alarm": (rm, test.alarm),
             "control_limit": (rm, test.control_limit, {"long_name": "alarm limit of the control statistic"}),
-            "reference_frequency_hz": (("mode",), ref.frequency_hz, {"units": "Hz"}),
-            "reference_damping_ratio": (("mode",), ref.damping_ratio),
-            "reference_mode_shape_real": (("channel", "mode"), ref.mode_shape.real),
-            "reference_mode_shape_imag": (("channel", "mode"), ref.mode_shape.imag),
-            "reference_presence": (("mode",), ref.presence),
-            "frequency_scatter": (("mode",), ref.frequency_scatter, {"units": "Hz"}),
-            "damping_scatter": (("mode",), ref.damping_scatter),
             "reference_reduced_chi2": (("mode",), test.reference_reduced_chi2),
             "reference_reduced_chi2_frequency": (("mode",), test.reference_reduced_chi2_frequency),
             "reference_reduced_chi2_damping": (("mode",), test.reference_reduced_chi2_damping),
@@ -796,7 +814,17 @@ def _consolidate(tasks, parts, tracking: TrackingSettings) -> Monitoring:
             "damping_coefficients": (("mode", "term"), test.coefficients_damping),
         })
     else:
-        data["alarm"] = (rm, np.zeros((n, 0), bool))
+        data["alarm"] = (rm, np.zeros((n, k_modes), bool))
+    if ref is not None:
+        data.update({
+            "reference_frequency_hz": (("mode",), ref.frequency_hz, {"units": "Hz"}),
+            "reference_damping_ratio": (("mode",), ref.damping_ratio),
+            "reference_mode_shape_real": (("channel", "mode"), ref.mode_shape.real),
+            "reference_mode_shape_imag": (("channel", "mode"), ref.mode_shape.imag),
+            "reference_presence": (("mode",), ref.presence),
+            "frequency_scatter": (("mode",), ref.frequency_scatter, {"units": "Hz"}),
+            "damping_scatter": (("mode",), ref.damping_scatter),
+        })
     coords = {"record": [t.name for t in tasks], "time": (rec_dims, times),
               "mode": np.arange(1, k_modes + 1), "channel": list(channels)}
     if test is not None:

@@ -69,7 +69,8 @@ class TrackingSettings:
     false_alarm_rate: float = 0.01
     #: EWMA weight of the newest record in the control statistic (1: each record on its own)
     smoothing: float = 0.3
-    #: scale each mode's covariances by its reference reduced χ² when that is above 1
+    #: scale each mode's covariances by its reference reduced χ² (over f and ξ) when that is above
+    #: its calibrated value ν/(ν-2)
     inflate_to_reference: bool = False
 
     def __post_init__(self):
@@ -99,8 +100,9 @@ def alarm_limit(false_alarm_rate: float, dof) -> np.ndarray:
     ``Ŝ`` is estimated with ``dof`` degrees of freedom: Hotelling's T², ``2ν/(ν-1) F(2, ν-1)``.
 
     A record's σ comes from the sample covariance of ``n_blocks`` blocks (ν = n_blocks - 1), so
-    its χ² has heavier tails than χ²(2) (mean 2ν/(ν-3): 2.24 for 20 blocks); with the χ²(2) limit the
-    false alarms would be 1.5-2 times the rate stated. ``dof = inf`` gives the χ²(2) quantile.
+    its χ² has heavier tails than χ²(2) (mean 2ν/(ν-3): 2.375 for 20 blocks); with the χ²(2) limit
+    the false alarms at 1 % would be 1.6 (50 blocks) to 2.9 (20 blocks) times the rate stated.
+    ``dof = inf`` gives the χ²(2) quantile.
     """
     nu = np.asarray(dof, float)
     chi2 = scipy.stats.chi2.isf(false_alarm_rate, 2)
@@ -324,6 +326,10 @@ def change_test(frequency, damping, covariance, reference, covariates=None,
     mean_X = np.nanmean(X[ref], axis=0) if X.shape[1] else np.zeros(0)
     D = np.column_stack([np.ones(n_rec), X - mean_X])
     p = D.shape[1]
+    known = ref & np.all(np.isfinite(D), axis=1)
+    if p > 1 and known.sum() >= p and np.linalg.matrix_rank(D[known]) < p:
+        raise ValueError("covariates: constant or collinear over the reference period, so their effect cannot be "
+                         "learned from it (a reference period spanning their range is needed, or leave them out)")
     nan = np.full((n_rec, n_modes), np.nan)
     out = {k: nan.copy() for k in ("ef", "ex", "zf", "zx", "chi2", "control")}
     limit_dof = nan.copy()  # degrees of freedom of each control statistic's covariance
@@ -342,7 +348,10 @@ def change_test(frequency, damping, covariance, reference, covariates=None,
         # weighted least squares of f and of ξ on the covariates over the reference period
         Df = D[r] / np.sqrt(vf[r])[:, None]
         Dx = D[r] / np.sqrt(vx[r])[:, None]
-        Gf, Gx = np.linalg.inv(Df.T @ Df), np.linalg.inv(Dx.T @ Dx)
+        try:
+            Gf, Gx = np.linalg.inv(Df.T @ Df), np.linalg.inv(Dx.T @ Dx)
+        except np.linalg.LinAlgError:
+            continue  # this mode's reference records do not span the covariates: no test for it
         bf[j] = Gf @ (Df.T @ (f[r, j] / np.sqrt(vf[r])))
         bx[j] = Gx @ (Dx.T @ (x[r, j] / np.sqrt(vx[r])))
         # covariance of the two coefficient vectors (f and ξ are correlated within a record)
@@ -355,7 +364,11 @@ def change_test(frequency, damping, covariance, reference, covariates=None,
         red_x[j] = np.sum(ex[r] ** 2 / vx[r]) / dof
         residuals = np.column_stack([ef[r], ex[r]])
         red[j] = sum(float(e @ np.linalg.solve(c, e)) for e, c in zip(residuals, C[r, j])) / (2 * dof)
-        scale = max(1.0, 0.5 * (red_f[j] + red_x[j])) if s.inflate_to_reference else 1.0
+        # calibrated, the reduced χ² is about ν/(ν-2) (σ estimated from ν degrees of freedom, which
+        # the Hotelling limit already allows for): inflate only beyond that
+        nu_ref = np.median(nu[r])
+        calibrated = nu_ref / (nu_ref - 2) if np.isfinite(nu_ref) and nu_ref > 2 else 1.0
+        scale = max(1.0, red[j] / calibrated) if s.inflate_to_reference else 1.0
 
         def prediction_cov(d):  # covariance of the reference's prediction at design row d
             return np.array([[d @ Gf @ d, d @ cfx @ d], [d @ cfx @ d, d @ Gx @ d]])

@@ -175,6 +175,57 @@ def test_reference_span_and_a_missing_covariate(campaign, serial):
     assert "a covariate (temperature ...) is missing" in text
 
 
+def test_a_covariate_constant_over_the_reference_leaves_the_store_and_says_why(campaign, tmp_path):
+    records = [type(r)(**{**r.__dict__, "covariates": {"temperature": 12.0 if k < 20 else float(k)}})
+               for k, r in enumerate(campaign.records)]
+    m = monitor(records, settings=SETTINGS, out=tmp_path / "t.nc", progress=False)
+    assert m.n_failed == 0 and (tmp_path / "t.nc").exists()
+    assert "covariates: constant or collinear" in m.dataset.attrs["tracking_error"]
+    assert np.isfinite(m.dataset["frequency_hz"].values).any() and "control" not in m.dataset
+    assert "no change test" in str(m)
+
+
+def test_the_callers_warning_filters_are_the_same_after_a_thread_pool_run(campaign):
+    import warnings
+
+    before = list(warnings.filters)
+    monitor(campaign.records[:8], settings=SETTINGS, threads=2, progress=False,
+            tracking=TrackingSettings(reference_records=4))
+    assert warnings.filters == before
+
+
+def test_a_failed_part_write_stops_the_queued_records(campaign, tmp_path, monkeypatch):
+    import modaluq.monitoring as monitoring
+
+    started = []
+
+    def counted(task, config):
+        started.append(task.key)
+        return monitoring_process_record(task, config)
+
+    monitoring_process_record = monitoring.process_record
+    monkeypatch.setattr(monitoring, "process_record", counted)
+
+    def full_disk(self, key, text):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(monitoring._Parts, "write", full_disk)
+    with pytest.raises(OSError, match="No space left"):
+        monitor(campaign.records[:12], settings=SETTINGS, out=tmp_path / "t.nc", threads=1, progress=False)
+    assert len(started) <= 2  # the one that failed to be written, and at most the one already running
+
+
+def test_no_resume_starts_again_with_other_settings(campaign, tmp_path):
+    out = tmp_path / "t.nc"
+    tracking = TrackingSettings(reference_records=4)
+    monitor(campaign.records[:6], settings=SETTINGS, out=out, progress=False, tracking=tracking)
+    other = SETTINGS.replace(orders=tuple(range(2, 21, 2)))
+    again = monitor(campaign.records[:5], settings=other, out=out, progress=False, tracking=tracking, resume=False)
+    assert again.n_run == 5
+    assert len([p for p in (tmp_path / "t.parts").glob("*.json") if p.name != "settings.json"]) == 5
+    assert monitor(campaign.records[:5], settings=other, out=out, progress=False, tracking=tracking).n_run == 0
+
+
 def test_time_from_file_names_and_record_order():
     assert time_from_name("bridge_2026-03-01_12-30-00.csv") == np.datetime64("2026-03-01T12:30:00")
     assert time_from_name("acc20260301T1230.h5") == np.datetime64("2026-03-01T12:30:00")

@@ -182,3 +182,37 @@ def test_settings_are_checked_by_name():
         TrackingSettings(reference_span=("2026-02-01", "2026-01-01"))
     with pytest.raises(ValueError, match="smoothing"):
         TrackingSettings(smoothing=1.5)
+
+
+def test_inflate_to_reference_restores_the_rate_when_sigma_is_too_small():
+    # every record's σ is half the truth (covariances 4 times too small): the reference's reduced χ²
+    # says about 4, the alarms are far too frequent, and inflate_to_reference brings them back
+    rng = np.random.default_rng(9)
+    p = 0.05
+    counts = {False: 0, True: 0}
+    reduced, n_tests = [], 0
+    for _ in range(30):
+        f, xi, C, T = gaussian_campaign(rng, 120)
+        ref = np.arange(120) < 60
+        for inflate in (False, True):
+            t = change_test(f, xi, C / 4, ref, T, TrackingSettings(smoothing=1.0, false_alarm_rate=p,
+                                                                    inflate_to_reference=inflate))
+            counts[inflate] += int(t.alarm[~ref].sum())
+        reduced.append(t.reference_reduced_chi2[0])
+        n_tests += int((~ref).sum())
+    assert abs(np.mean(reduced) - 4) < 0.4
+    assert counts[False] > 5 * n_tests * p
+    assert abs(counts[True] - n_tests * p) < 4 * np.sqrt(n_tests * p * (1 - p)) + 0.2 * n_tests * p, counts
+    # σ calibrated: nothing changes (the reduced χ² stays near its calibrated value)
+    f, xi, C, T = gaussian_campaign(rng, 400)
+    ref = np.arange(400) < 300
+    plain, inflated = (change_test(f, xi, C, ref, T, TrackingSettings(inflate_to_reference=i)) for i in (False, True))
+    np.testing.assert_allclose(inflated.control[~ref], plain.control[~ref], rtol=0.1)
+
+
+def test_a_covariate_constant_over_the_reference_is_a_value_error_naming_it():
+    rng = np.random.default_rng(10)
+    f, xi, C, T = gaussian_campaign(rng, 60)
+    T[:30] = 12.0  # the reference period saw one temperature only
+    with pytest.raises(ValueError, match="covariates: constant or collinear over the reference period"):
+        change_test(f, xi, C, np.arange(60) < 30, T)

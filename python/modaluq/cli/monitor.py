@@ -89,6 +89,8 @@ def run(args) -> int:
                        f"{failures.iloc[0]['source']}: {failures.iloc[0]['error']})")
     if result.reference is None:
         print(f"modaluq monitor: warning: no tracking: {result.dataset.attrs['tracking_error']}", file=sys.stderr)
+    elif result.dataset.attrs.get("tracking_error"):
+        print(f"modaluq monitor: warning: {result.dataset.attrs['tracking_error']}", file=sys.stderr)
     return 0
 
 
@@ -136,7 +138,8 @@ def register(subparsers) -> argparse.ArgumentParser:
     x.add_argument("--workers", type=integer_option(1), default=None, metavar="N",
                    help="start a Dask LocalCluster of N one-thread worker processes")
     x.add_argument("--scheduler", default=None, metavar="ADDR", help="a running Dask scheduler, e.g. tcp://host:8786")
-    g.add_argument("--no-resume", action="store_true", help="run every record again, even those done before")
+    g.add_argument("--no-resume", action="store_true",
+                   help="start again: remove the part files of earlier runs (any settings) and run every record")
     g = p.add_argument_group("output")
     g.add_argument("--poles", metavar="PATH", default=None,
                    help="the table of every pole of the selected modes (.csv or .parquet; default STEM.poles.csv)")
