@@ -29,11 +29,11 @@ from .auto_settings import choose_settings
 from .checks import as_samples, check_boolean, check_sampling_frequency
 from .harmonics import harmonic_kurtosis, possible_harmonics
 from .horizons import HorizonCheck
-from .identification import identify
+from .identification import identify_quietly
 from .io import Recording, load
 from .preprocess import Preprocessed, preprocess
 from .provenance import provenance
-from .results import Result
+from .results import Result, warn_all
 from .selection import SelectedModes, select_modes
 from .settings import ClusteringSettings, PoleStatus, Settings, StabilityCriteria
 from .stabilization import Diagram, stabilization_diagram
@@ -207,28 +207,28 @@ class Analysis:
                                 f"past_block_rows {q}, {l} outputs and {n_refs} references")
 
     def run(self, *, check_horizons: bool = False, check_harmonics: bool = True,
-            progress: Callable[[str], None] | None = None) -> "Analysis":
+            progress: Callable[[str], None] | None = None, issue_warnings: bool = True) -> "Analysis":
         """Identify, form the diagram, select the modes (and check the horizons); returns self.
 
         ``check_harmonics``: flag the selected modes that may be harmonics of the excitation
         (:mod:`modaluq.harmonics`; it filters the record around each mode, which costs about as
         much as the identification of a long many-channel record). ``progress`` is called with
         the name of each step before it starts. The identification's warnings are kept in
-        :attr:`warnings` and issued again.
+        :attr:`warnings` and, with ``issue_warnings`` (default), issued as :class:`ModalUQWarning`;
+        threads running analyses at once pass False (Python's warning filters are global state).
         """
+        issue_warnings = check_boolean("issue_warnings", issue_warnings)
         step = progress or (lambda _: None)
         pre = self.preprocess()
         s = self.identification_settings()
 
         step("identifying")
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always")
-            result = identify(pre.y, pre.u, fs=pre.fs, settings=s, output_names=self.output_names)
+        result = identify_quietly(pre.y, pre.u, fs=pre.fs, settings=s, output_names=self.output_names)
         result.settings["preprocessing"] = pre.settings()  # what was done to the record's samples
         self.result = result
-        self.warnings = tuple(str(w.message) for w in caught)
-        for w in caught:
-            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+        self.warnings = tuple(result.warnings)
+        if issue_warnings:
+            warn_all(result)
 
         step("stabilization diagram")
         self.diagram = stabilization_diagram(result, self.criteria, output_names=self.output_names)

@@ -20,7 +20,7 @@ from .preprocess import preprocess
 from .results import Result, result_from_core, warn_all
 from .settings import Settings
 
-__all__ = ["identify", "make_settings"]
+__all__ = ["identify", "identify_quietly", "make_settings"]
 
 
 def make_settings(settings: Settings | None, keywords: dict, *, function: str = "identify") -> Settings:
@@ -122,6 +122,16 @@ def identify(y, u=None, *, fs: float, settings: Settings | None = None,
     >>> [round(float(f), 1) for f in modes.frequency_hz]
     [1.9, 5.6, 8.7, 14.5, 15.8, 17.0]
     """
+    result = identify_quietly(y, u, fs=fs, settings=settings, output_names=output_names, **keywords)
+    warn_all(result)
+    return result
+
+
+def identify_quietly(y, u=None, *, fs: float, settings: Settings | None = None,
+                     output_names: Sequence[str] | None = None, **keywords) -> Result:
+    """:func:`identify` without issuing ``Result.warnings`` as Python warnings (they are kept in
+    the result). For threads identifying at once: Python's warning filters are one global state,
+    and catching each thread's warnings with ``warnings.catch_warnings`` mixes them up."""
     fs = check_sampling_frequency(fs)
     s = make_settings(settings, keywords)
     names = _output_names(output_names, y)
@@ -161,10 +171,8 @@ def identify(y, u=None, *, fs: float, settings: Settings | None = None,
         capped = capped_lag_warning(chosen, fs, y.shape[1], band)
         if capped:
             extra.append(capped)
-    result = result_from_core(ident, record, y.shape[1], 0 if u is None else u.shape[1], extra_warnings=extra,
-                              output_names=names)
-    warn_all(result)
-    return result
+    return result_from_core(ident, record, y.shape[1], 0 if u is None else u.shape[1], extra_warnings=extra,
+                            output_names=names)
 
 
 def _output_names(output_names, y) -> tuple:

@@ -224,9 +224,11 @@ def process_record(task: RecordTask, config: TaskConfig) -> dict:
             nonlocal stage
             stage = "identify" if what == "identifying" else "select"
 
+        # the identification's warnings are kept, as text, in analysis.warnings and not issued:
+        # Python's warning filters are global, and records run at once on threads would mix them
         with warnings.catch_warnings():
-            warnings.simplefilter("ignore")  # kept, as text, in analysis.warnings
-            analysis.run(check_harmonics=config.check_harmonics, progress=step)
+            warnings.simplefilter("ignore")  # anything else a record's steps may warn of
+            analysis.run(check_harmonics=config.check_harmonics, progress=step, issue_warnings=False)
         stage = "select"
         out.update(_modes_of(analysis))
         out.update(status="done", stage="", warnings=list(analysis.warnings))
@@ -782,6 +784,8 @@ def _consolidate(tasks, parts, tracking: TrackingSettings) -> Monitoring:
         "status": (rec_dims, np.array([p["status"] for p in parts], dtype=object)),
         "failed_stage": (rec_dims, np.array([p.get("stage", "") for p in parts], dtype=object)),
         "error": (rec_dims, np.array([p.get("error", "") for p in parts], dtype=object)),
+        "warnings": (rec_dims, np.array(["\n".join(p.get("warnings", [])) for p in parts], dtype=object),
+                     {"long_name": "the identification's warnings, one per line"}),
         "in_reference": (rec_dims, in_ref),
         "n_blocks": (rec_dims, np.array([p.get("n_blocks", 0) if done[k] else 0 for k, p in enumerate(parts)])),
         "n_modes_selected": (rec_dims, np.array([len(p["modes"]["frequency_hz"]) if done[k] else 0
@@ -837,6 +841,7 @@ def _consolidate(tasks, parts, tracking: TrackingSettings) -> Monitoring:
     ds["status"] = ds["status"].astype(str)
     ds["failed_stage"] = ds["failed_stage"].astype(str)
     ds["error"] = ds["error"].astype(str)
+    ds["warnings"] = ds["warnings"].astype(str)
 
     rows = []
     for k, p in enumerate(parts):

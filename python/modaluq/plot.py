@@ -308,13 +308,25 @@ def _time_axis(ds):
     return np.arange(ds.sizes["record"]), "record"
 
 
-def _finish_track_axes(axes, xlabel: str, ncol: int) -> None:
-    """One legend of every panel's entries (an alarm may be in any panel) and readable dates."""
+def _track_panels(ds, fig, modes, figsize):
+    """A figure of one panel per tracked mode sharing the time axis: (fig, axes, modes, (x, xlabel))."""
+    modes = list(ds["mode"].values) if modes is None else [check_integer("modes", m, minimum=1) for m in modes]
+    n = max(len(modes), 1)
+    if fig is None:
+        fig = StandaloneFigure(figsize=figsize or (9.0, 1.2 + TRACK_ROW_HEIGHT * n), layout="constrained")
+    axes = fig.subplots(n, 1, sharex=True, squeeze=False)[:, 0]
+    return fig, axes, modes, _time_axis(ds)
+
+
+def _finish_track_axes(fig, axes, xlabel: str, ncol: int) -> None:
+    """One legend of every panel's entries (an alarm may be in any panel), below the panels so
+    that it covers no record, and readable dates."""
     entries = {}
     for ax in axes:
         for handle, label in zip(*ax.get_legend_handles_labels()):
             entries.setdefault(label, handle)
-    axes[0].legend(entries.values(), entries.keys(), loc="upper left", fontsize="small", ncol=ncol, framealpha=0.9)
+    fig.legend(entries.values(), entries.keys(), loc="outside lower center", fontsize="small", ncol=ncol,
+               frameon=False)
     if xlabel == "time":  # full dates overlap on a multi-day axis: only what changes between ticks
         import matplotlib.dates as mdates
 
@@ -331,12 +343,7 @@ def plot_tracked_frequencies(ds, fig=None, *, modes=None, figsize=None):
     ``ds`` is :attr:`modaluq.monitoring.Monitoring.dataset` (or :func:`modaluq.monitoring.load_tracks`);
     ``modes`` the 1-based modes to draw (default all).
     """
-    modes = list(ds["mode"].values) if modes is None else [check_integer("modes", m, minimum=1) for m in modes]
-    n = max(len(modes), 1)
-    if fig is None:
-        fig = StandaloneFigure(figsize=figsize or (9.0, 1.2 + TRACK_ROW_HEIGHT * n), layout="constrained")
-    x, xlabel = _time_axis(ds)
-    axes = fig.subplots(n, 1, sharex=True, squeeze=False)[:, 0]
+    fig, axes, modes, (x, xlabel) = _track_panels(ds, fig, modes, figsize)
     if not modes:
         axes[0].text(0.5, 0.5, "no tracked mode", ha="center", va="center", transform=axes[0].transAxes)
         return fig
@@ -356,7 +363,7 @@ def plot_tracked_frequencies(ds, fig=None, *, modes=None, figsize=None):
             ax.plot(x[alarm], f[alarm], "v", color="tab:red", ms=5, label="alarm")
         ax.set_ylabel(f"mode {mode}\nf [Hz]")
         ax.grid(alpha=0.3)
-    _finish_track_axes(axes, xlabel, ncol=5)
+    _finish_track_axes(fig, axes, xlabel, ncol=5)
     fig.suptitle("tracked frequencies (alarm: control statistic above the limit of "
                  f"{ds.attrs.get('false_alarm_rate', float('nan')):g} false alarms per record)", fontsize="medium")
     return fig
@@ -365,12 +372,7 @@ def plot_tracked_frequencies(ds, fig=None, *, modes=None, figsize=None):
 def plot_control_chart(ds, fig=None, *, modes=None, figsize=None):
     """The control statistic (χ² with 2 degrees of freedom when nothing changed) of each tracked
     mode against time, with the alarm limit and each record's own χ² (2 degrees of freedom)."""
-    modes = list(ds["mode"].values) if modes is None else [check_integer("modes", m, minimum=1) for m in modes]
-    n = max(len(modes), 1)
-    if fig is None:
-        fig = StandaloneFigure(figsize=figsize or (9.0, 1.2 + TRACK_ROW_HEIGHT * n), layout="constrained")
-    x, xlabel = _time_axis(ds)
-    axes = fig.subplots(n, 1, sharex=True, squeeze=False)[:, 0]
+    fig, axes, modes, (x, xlabel) = _track_panels(ds, fig, modes, figsize)
     if not modes or "control" not in ds:
         axes[0].text(0.5, 0.5, "no tracked mode", ha="center", va="center", transform=axes[0].transAxes)
         return fig
@@ -388,6 +390,6 @@ def plot_control_chart(ds, fig=None, *, modes=None, figsize=None):
         top = np.nanmax(np.concatenate([c, limit]), initial=10.0) if np.isfinite(limit).any() else 10.0
         ax.set_ylim(1e-2, 2 * top)
         ax.grid(alpha=0.3, which="major")
-    _finish_track_axes(axes, xlabel, ncol=4)
+    _finish_track_axes(fig, axes, xlabel, ncol=4)
     fig.suptitle("control chart (multivariate EWMA of f and ξ against the reference)", fontsize="medium")
     return fig

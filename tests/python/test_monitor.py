@@ -194,6 +194,20 @@ def test_the_callers_warning_filters_are_the_same_after_a_thread_pool_run(campai
     assert warnings.filters == before
 
 
+def test_on_a_thread_pool_each_record_keeps_its_own_warnings_and_none_is_issued(campaign, serial):
+    import warnings
+
+    # these short records warn of slowly decaying poles, each with its own count and times
+    expected = serial.dataset["warnings"].values[:8]
+    assert len(set(expected)) >= 4 and all("decay more slowly" in w for w in expected if w)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        threaded = monitor(campaign.records[:8], settings=SETTINGS, threads=2, progress=False,
+                           tracking=TrackingSettings(reference_records=4))
+    assert [str(w.message) for w in caught if issubclass(w.category, modaluq.ModalUQWarning)] == []
+    np.testing.assert_array_equal(threaded.dataset["warnings"].values, expected)
+
+
 def test_a_failed_part_write_stops_the_queued_records(campaign, tmp_path, monkeypatch):
     import modaluq.monitoring as monitoring
 
@@ -266,12 +280,17 @@ def test_cli_over_a_folder_of_csv_files(csv_folder, tmp_path, capsys):
     rc = main(["monitor", str(folder), "--out", str(out), "--orders", "2:24:2", "--reference-records", "10",
                "--covariates", str(folder.with_name("site.covariates.csv")), "--plot", str(tmp_path / "f.png"),
                "--threads", "2", "--no-progress"])
-    text = capsys.readouterr().out
+    captured = capsys.readouterr()
+    text = captured.out
     assert rc == 0, text
     assert "20 records: 20 identified, 0 failed" in text and out.exists() and (tmp_path / "f.png").exists()
     ds = load_tracks(out)
     assert ds["frequency_hz"].dims == ("record", "mode") and ds["alarm"].dims == ("record", "mode")
     assert ds["alarm"].dtype == bool
+    # the records' identification warnings (these short records warn of slow decay): counted on
+    # stderr, kept in the store
+    warned = [w for w in ds["warnings"].values if w]
+    assert warned and f"{len(warned)} of 20 records have identification warnings" in captured.err
 
 
 def test_cli_over_only_bad_files_exits_2_with_a_summary(tmp_path, capsys):

@@ -67,6 +67,10 @@ def run(args) -> int:
         stages = failures["stage"].value_counts()
         print(f"modaluq monitor: {len(failures)} of {result.n_records} records failed ("
               + ", ".join(f"{n} at {stage}" for stage, n in stages.items()) + ")", file=sys.stderr)
+    warned = [w for w in result.dataset["warnings"].values if w]
+    if warned:
+        print(f"modaluq monitor: {len(warned)} of {result.n_records} records have identification warnings (the "
+              f"store's 'warnings' variable); the first: {warned[0].splitlines()[0]}", file=sys.stderr)
     alarms = result.alarms()
     if len(alarms):
         print(f"\n{len(alarms)} alarms (record, mode, frequency, standardised changes, control statistic):")
