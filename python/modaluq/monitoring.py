@@ -46,6 +46,7 @@ from .analysis import Analysis
 from .checks import check_boolean, check_integer, require
 from .io import SUPPORTED_EXTENSIONS
 from .plot import plot_control_chart, plot_tracked_frequencies
+from .results import ModalUQWarning
 from .settings import ClusteringSettings, Settings, StabilityCriteria
 from .tracking import RecordModes, ReferenceModes, TrackingSettings, assign, change_test, reference_modes
 from .version import __version__
@@ -82,8 +83,10 @@ def record_files(paths) -> list:
                 raise ValueError(f"records: the folder {text!r} holds no recording file "
                                  f"({' '.join(RECORD_EXTENSIONS)})")
             out += hits
+        elif not Path(text).exists() and (text.endswith(("/", os.sep)) or not Path(text).suffix):
+            raise ValueError(f"records: no such file or folder: {text}")
         else:
-            out.append(Path(text))  # a missing file is the record's failure, not the batch's
+            out.append(Path(text))  # a missing file is the record's failure, not the batch's (copied late)
     return out
 
 
@@ -144,7 +147,7 @@ def _tasks(records, covariates) -> list:
     if not items:
         raise ValueError("records: no record given")
     table = _covariate_table(covariates)
-    tasks = []
+    tasks, matched = [], 0
     for k, (path, obj) in enumerate(items):
         if path is not None:
             key, name, source = str(path.resolve()), path.name, str(path)
@@ -156,6 +159,7 @@ def _tasks(records, covariates) -> list:
             cov = dict(getattr(obj, "covariates", None) or {})
         row = table.get(name) or (table.get(Path(name).stem) if path is not None else None)
         if row is not None:
+            matched += 1
             row = dict(row)
             if row.get("time") is not None:
                 t = row.pop("time")
@@ -164,12 +168,17 @@ def _tasks(records, covariates) -> list:
             cov.update(row)
         tasks.append(RecordTask(key=key, name=name, source=source,
                                 time=None if t is None else np.datetime64(t, "s"), covariates=cov))
+    if table and not matched:
+        raise ValueError(f"covariates: no row of the table is a record (its 'record' column holds e.g. "
+                         f"{next(iter(table))!r}; the records are named e.g. {tasks[0].name!r})")
     keys = [t.key for t in tasks]
     if len(set(keys)) != len(keys):
         dup = sorted({k for k in keys if keys.count(k) > 1})[:3]
         raise ValueError(f"records: the same record is given more than once: {', '.join(dup)}")
-    if all(t.time is not None for t in tasks):
-        tasks.sort(key=lambda t: t.time)  # stable: equal times keep the given order
+    if any(t.time is not None for t in tasks):
+        # by time where it is known (stable: equal times keep the given order); records without a
+        # time after them, in the order given (a note says so: _notes)
+        tasks.sort(key=lambda t: (t.time is None, t.time if t.time is not None else np.datetime64(0, "s")))
     return tasks
 
 
@@ -189,6 +198,10 @@ def _covariate_table(covariates) -> dict:
     df = covariates.copy()
     if "record" in df.columns:
         df = df.set_index("record")
+    elif df.index.name != "record":
+        columns = ", ".join(map(str, df.columns))
+        raise ValueError("covariates: the table needs a 'record' column (the records' file names, or the names of "
+                         f"record objects) to match its rows to the records; its columns: {columns}")
     out = {}
     for name, row in df.iterrows():
         entry = {}
@@ -348,8 +361,10 @@ class _Parts:
             except ValueError:
                 previous = None
             if previous != fingerprint:
-                raise ValueError(f"the part files in {folder} were made with other settings (or another modaluq "
-                                 "version); remove that folder, or write to another store, to start again")
+                changed = _changed_keys(previous, fingerprint)
+                raise ValueError(f"the part files in {folder} were made with other settings ({', '.join(changed)} "
+                                 "differ); run again with resume=False (--no-resume) to start again with these "
+                                 "settings, or write to another store")
         else:
             _atomic_write(stamp, json.dumps(fingerprint, indent=1).encode())
 
@@ -367,6 +382,15 @@ class _Parts:
     def write(self, key: str, text: str) -> None:
         """Write the part of ``key`` (``text``: its JSON)."""
         _atomic_write(self.path(key), text.encode())
+
+
+def _changed_keys(old, new, prefix="") -> list:
+    """The dotted keys whose values differ between two fingerprints (e.g. ``settings.frequency_range``)."""
+    if not isinstance(old, dict) or not isinstance(new, dict):
+        return [prefix or "the file"] if old != new else []
+    keys = sorted(set(old) | set(new))
+    return [c for k in keys for c in _changed_keys(old.get(k), new.get(k), f"{prefix}{k}" if not prefix
+                                                   else f"{prefix}.{k}")]
 
 
 def _remove_stale_temporaries(folder: Path) -> None:
@@ -479,6 +503,7 @@ class Monitoring:
     failures: object                   #: pandas.DataFrame: record, source, stage, error
     reference: Optional[ReferenceModes] = None
     tracking: TrackingSettings = field(default_factory=TrackingSettings)
+    notes: tuple = ()                  #: what limits the run's tests (records not tested, order, reference)
     written: tuple = ()                #: files written
     seconds: float = 0.0               #: wall time of the run
     n_run: int = 0                     #: records run by this call (the rest came from part files)
@@ -512,6 +537,17 @@ class Monitoring:
         return plot_control_chart(self.dataset, **kwargs)
 
     def __str__(self) -> str:
+        return self.summary()
+
+    def summary(self, notes: bool = True) -> str:
+        """The run, the reference modes with their reduced χ² and alarm counts, and (``notes``)
+        what limits the tests (:attr:`notes`)."""
+        text = self._summary()
+        if notes and self.notes:
+            text += "\n" + "\n".join(f"note: {n}" for n in self.notes)
+        return text
+
+    def _summary(self) -> str:
         ds = self.dataset
         n_done = int((ds["status"] == "done").sum())
         lines = [f"{self.n_records} records: {n_done} identified, {self.n_failed} failed "
@@ -532,26 +568,32 @@ class Monitoring:
         lines.append(f"reference: {int(ref.sum())} records; alarms at a false-alarm rate of "
                      f"{self.tracking.false_alarm_rate:g} per record and mode (median limit {shown}, "
                      f"EWMA weight {self.tracking.smoothing:g})")
-        lines.append(" mode  f_ref [Hz]  xi_ref [%]  found   reduced chi2 (f, xi)   alarms after the reference")
+        lines.append(" mode  f_ref [Hz]  xi_ref [%]  found   reduced chi2 (f, xi)   alarms of the records tested")
         after = ~ref & (ds["status"].values == "done")
-        # a reduced χ² above its 99.9 % quantile: σ too small on this structure, or a covariate missing
-        dof = max(int(ref.sum()) - ds.sizes.get("term", 1), 1)
-        high = scipy.stats.chi2.isf(0.001, dof) / dof
-        flagged = 0
+        flagged, high = _miscalibrated(ds["reference_reduced_chi2_frequency"].values,
+                                       ds["reference_reduced_chi2_damping"].values, int(ref.sum()),
+                                       ds.sizes.get("term", 1))
         for j in range(ds.sizes["mode"]):
             found = np.isfinite(ds["frequency_hz"].values[:, j])
+            tested = after & np.isfinite(ds["control"].values[:, j])
             n_alarm = int(ds["alarm"].values[after, j].sum())
             red = (ds["reference_reduced_chi2_frequency"].values[j], ds["reference_reduced_chi2_damping"].values[j])
-            flag = " !" if max(red) > high else ""
-            flagged += bool(flag)
+            flag = " !" if flagged[j] else ""
             lines.append(f" {j + 1:4d}  {ds['reference_frequency_hz'].values[j]:10.4f}  "
                          f"{100 * ds['reference_damping_ratio'].values[j]:10.3f}  {int(found.sum()):5d}   "
-                         f"{red[0]:9.2f} {red[1]:9.2f}{flag:2s}  {n_alarm:5d} of {int((after & found).sum())}")
-        if flagged:
-            lines.append(f" !: reduced chi2 above {high:.2f} (its 99.9 % quantile): sigma is too small on this "
-                         "structure or a covariate (temperature ...) is missing; alarms are then too frequent "
-                         "(docs/monitoring.md §4: inflate_to_reference)")
+                         f"{red[0]:9.2f} {red[1]:9.2f}{flag:2s}  {n_alarm:5d} of {int(tested.sum())}")
+        if flagged.any():
+            lines.append(f" !: reduced chi2 above {high:.2f}, its 99.9 % quantile (see the note)")
         return "\n".join(lines)
+
+
+def _miscalibrated(reduced_chi2_frequency, reduced_chi2_damping, n_reference: int, n_terms: int):
+    """Modes whose reference reduced χ² (of f or ξ) is above its 99.9 % quantile: σ too small on
+    this structure, or a covariate missing. Returns (mask, the quantile)."""
+    dof = max(n_reference - n_terms, 1)
+    high = scipy.stats.chi2.isf(0.001, dof) / dof
+    red = np.fmax(np.asarray(reduced_chi2_frequency, float), np.asarray(reduced_chi2_damping, float))
+    return np.nan_to_num(red) > high, high
 
 
 def monitor(records, *, out=None, settings: Settings | None = None, criteria: StabilityCriteria | None = None,
@@ -661,6 +703,8 @@ def monitor(records, *, out=None, settings: Settings | None = None, criteria: St
     if out_paths:
         result.written = _write(result, out_paths)
     result.seconds = time.perf_counter() - t0
+    for note in result.notes:
+        warnings.warn(note, ModalUQWarning, stacklevel=2)
     return result
 
 
@@ -804,7 +848,7 @@ def _consolidate(tasks, parts, tracking: TrackingSettings) -> Monitoring:
     if test is not None:
         data.update({
             "expected_frequency_hz": (rm, test.expected_frequency_hz, {"units": "Hz"}),
-            "expected_damping_ratio": (rm, test.expected_damping_ratio),
+            "expected_damping_ratio": (rm, test.expected_damping_ratio, {"units": "1"}),
             "frequency_change": (rm, test.frequency_change, {"long_name": "standardised frequency change"}),
             "damping_change": (rm, test.damping_change, {"long_name": "standardised damping change"}),
             "chi2": (rm, test.chi2, {"long_name": "chi-squared of f and xi against the reference (2 dof)"}),
@@ -814,20 +858,22 @@ def _consolidate(tasks, parts, tracking: TrackingSettings) -> Monitoring:
             "reference_reduced_chi2": (("mode",), test.reference_reduced_chi2),
             "reference_reduced_chi2_frequency": (("mode",), test.reference_reduced_chi2_frequency),
             "reference_reduced_chi2_damping": (("mode",), test.reference_reduced_chi2_damping),
-            "frequency_coefficients": (("mode", "term"), test.coefficients_frequency),
-            "damping_coefficients": (("mode", "term"), test.coefficients_damping),
+            "frequency_coefficients": (("mode", "term"), test.coefficients_frequency,
+                                       {"units": "Hz (constant), Hz per covariate unit (the others)"}),
+            "damping_coefficients": (("mode", "term"), test.coefficients_damping,
+                                     {"units": "1 (constant), 1 per covariate unit (the others)"}),
         })
     else:
         data["alarm"] = (rm, np.zeros((n, k_modes), bool))
     if ref is not None:
         data.update({
             "reference_frequency_hz": (("mode",), ref.frequency_hz, {"units": "Hz"}),
-            "reference_damping_ratio": (("mode",), ref.damping_ratio),
+            "reference_damping_ratio": (("mode",), ref.damping_ratio, {"units": "1"}),
             "reference_mode_shape_real": (("channel", "mode"), ref.mode_shape.real),
             "reference_mode_shape_imag": (("channel", "mode"), ref.mode_shape.imag),
             "reference_presence": (("mode",), ref.presence),
             "frequency_scatter": (("mode",), ref.frequency_scatter, {"units": "Hz"}),
-            "damping_scatter": (("mode",), ref.damping_scatter),
+            "damping_scatter": (("mode",), ref.damping_scatter, {"units": "1"}),
         })
     coords = {"record": [t.name for t in tasks], "time": (rec_dims, times),
               "mode": np.arange(1, k_modes + 1), "channel": list(channels)}
@@ -837,6 +883,8 @@ def _consolidate(tasks, parts, tracking: TrackingSettings) -> Monitoring:
              "false_alarm_rate": tracking.false_alarm_rate,
              "smoothing": tracking.smoothing, "tracking": json.dumps(tracking.to_dict()),
              "covariate_names": json.dumps(cov_names), "tracking_error": error}
+    notes = _notes(tasks, done, in_ref, X, cov_names, tracking, test)
+    attrs["notes"] = json.dumps(notes)
     ds = xr.Dataset(data, coords=coords, attrs=attrs)
     ds["status"] = ds["status"].astype(str)
     ds["failed_stage"] = ds["failed_stage"].astype(str)
@@ -864,7 +912,45 @@ def _consolidate(tasks, parts, tracking: TrackingSettings) -> Monitoring:
                               "stage": p.get("stage", ""), "error": p.get("error", "")}
                              for k, p in enumerate(parts) if not done[k]],
                             columns=["record", "source", "stage", "error"])
-    return Monitoring(dataset=ds, poles=poles, failures=failures, reference=ref, tracking=tracking)
+    return Monitoring(dataset=ds, poles=poles, failures=failures, reference=ref, tracking=tracking, notes=tuple(notes))
+
+
+def _names(tasks, which, shown=3) -> str:
+    k = np.flatnonzero(which)
+    return ", ".join(tasks[i].name for i in k[:shown]) + (f" and {len(k) - shown} more" if len(k) > shown else "")
+
+
+def _notes(tasks, done, in_ref, X, cov_names, tracking: TrackingSettings, test) -> list:
+    """What limits the run's tests, said rather than silent: records without a time among
+    records with one, a reference period that takes every record, records without covariates,
+    modes whose σ the reference period does not confirm."""
+    notes = []
+    if test is not None:
+        flagged, high = _miscalibrated(test.reference_reduced_chi2_frequency, test.reference_reduced_chi2_damping,
+                                       int(in_ref.sum()), 1 + len(cov_names))
+        if flagged.any():
+            modes = ", ".join(str(j + 1) for j in np.flatnonzero(flagged))
+            then = ("their covariances were scaled up to it (inflate_to_reference)" if tracking.inflate_to_reference
+                    else "their alarms are more frequent than the rate stated (inflate_to_reference, "
+                         "--inflate-to-reference, scales their σ up to it)")
+            notes.append(f"mode(s) {modes}: the reduced chi2 of the reference period is above {high:.2f}, its "
+                         "99.9 % quantile: sigma is too small on this structure or a covariate (temperature ...) "
+                         f"is missing; {then}")
+    untimed = done & np.array([t.time is None for t in tasks])
+    if untimed.any() and any(t.time is not None for t in tasks):
+        notes.append(f"{int(untimed.sum())} of {int(done.sum())} identified records have no time "
+                     f"({_names(tasks, untimed)}): they are placed after the records with a time, in the order given")
+    if tracking.reference_span is None and done.any() and int(done.sum()) <= tracking.reference_records:
+        notes.append(f"the reference period takes all {int(done.sum())} identified records (reference_records "
+                     f"{tracking.reference_records}): no record after it is tested")
+    if cov_names:
+        lacking = done & ~np.all(np.isfinite(X), axis=1)
+        if lacking.any():
+            ref_part = (f"; {int((lacking & in_ref).sum())} of the {int(in_ref.sum())} reference records are left "
+                        "out of the fit" if (lacking & in_ref).any() else "")
+            notes.append(f"{int(lacking.sum())} records have no value of a covariate ({', '.join(cov_names)}) "
+                         f"({_names(tasks, lacking)}): they are tracked but not tested, no alarm is possible{ref_part}")
+    return notes
 
 
 def _write(result: Monitoring, paths: dict) -> tuple:

@@ -141,6 +141,11 @@ def simulate_monitoring(n_records: int = 200, *, interval_s: float = 3600.0, sta
     -------
     MonitoringSimulation
         The records (lazy), times, temperatures, the damaged flag and the true modal parameters.
+
+    A campaign of more records is another campaign, not this one extended: its temperature
+    series is drawn for ``n_records``, and every record's stiffness follows it. To try a nightly
+    run that adds records, simulate the whole campaign once and copy its files into the folder
+    a few at a time.
     """
     n_records = check_integer("n_records", n_records, minimum=1)
     interval_s = check_real("interval_s", interval_s, low=0.0, low_open=True)

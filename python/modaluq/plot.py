@@ -364,8 +364,9 @@ def plot_tracked_frequencies(ds, fig=None, *, modes=None, figsize=None):
         ax.set_ylabel(f"mode {mode}\nf [Hz]")
         ax.grid(alpha=0.3)
     _finish_track_axes(fig, axes, xlabel, ncol=5)
-    fig.suptitle("tracked frequencies (alarm: control statistic above the limit of "
-                 f"{ds.attrs.get('false_alarm_rate', float('nan')):g} false alarms per record)", fontsize="medium")
+    rate = ds.attrs.get("false_alarm_rate", float("nan"))
+    fig.suptitle(f"tracked frequencies (alarm: control statistic above the limit of {rate:g} false alarms per "
+                 "record and mode)", fontsize="medium")
     return fig
 
 

@@ -109,9 +109,11 @@ def test_resume_runs_nothing_done_and_refuses_other_settings(campaign, tmp_path)
     assert first.n_run == 8 and again.n_run == 4  # only the 4 new records ran
     assert all(p.stat().st_mtime_ns == t for p, t in stamps.items())
     np.testing.assert_array_equal(again.dataset["frequency_hz"].values[:8], first.dataset["frequency_hz"].values)
-    with pytest.raises(ValueError, match="other settings"):
+    # other settings: refused, naming what differs and how to start again
+    with pytest.raises(ValueError, match=r"other settings \(settings\.orders differ\).*--no-resume"):
         monitor(campaign.records[:8], settings=SETTINGS.replace(orders=(2, 4, 6, 8)), out=out, progress=False)
-    assert monitor(campaign.records[:8], settings=SETTINGS, out=out, progress=False, resume=False).n_run == 8
+    assert monitor(campaign.records[:8], settings=SETTINGS, out=out, progress=False, resume=False,
+                   tracking=TrackingSettings(reference_records=4)).n_run == 8
 
 
 def test_a_restart_removes_the_half_written_parts_of_a_killed_writer(campaign, tmp_path):
@@ -148,8 +150,10 @@ def test_a_corrupt_file_is_a_failure_with_its_stage_and_the_batch_goes_on(csv_fo
                comments="")
     files = record_files([folder]) + [bad / "corrupt.csv", short, bad / "missing.csv"]
     m = monitor(files, settings=SETTINGS, out=tmp_path / "t.nc", progress=False,
-                covariates=folder.with_name("site.covariates.csv"))
+                covariates=folder.with_name("site.covariates.csv"), tracking=TrackingSettings(reference_records=8))
     assert m.n_records == 23 and m.n_failed == 3
+    # the failed files have no time, but only identified records' order matters: no note of it
+    assert m.notes == ()
     f = m.failures.set_index("record")
     assert f.loc["corrupt.csv", "stage"] == "load" and f.loc["missing.csv", "stage"] == "load"
     assert "missing.csv" in f.loc["missing.csv", "error"]
@@ -171,8 +175,9 @@ def test_reference_span_and_a_missing_covariate(campaign, serial):
     assert np.isnan(m.dataset["control"].values[:4]).all() and np.isfinite(m.dataset["chi2"].values[:4]).any()
     # without the temperature, the reference's reduced χ² flags it in the summary
     records = [type(r)(**{**r.__dict__, "covariates": {}}) for r in campaign.records]
-    text = str(monitor(records, settings=SETTINGS, progress=False))
-    assert "a covariate (temperature ...) is missing" in text
+    with pytest.warns(modaluq.ModalUQWarning, match=r"mode\(s\) 1, 2, .*reduced chi2 .* a covariate .* is missing"):
+        text = str(monitor(records, settings=SETTINGS, progress=False))
+    assert "!: reduced chi2 above" in text and "note: mode(s) 1, 2" in text
 
 
 def test_a_covariate_constant_over_the_reference_leaves_the_store_and_says_why(campaign, tmp_path):
@@ -183,6 +188,49 @@ def test_a_covariate_constant_over_the_reference_leaves_the_store_and_says_why(c
     assert "covariates: constant or collinear" in m.dataset.attrs["tracking_error"]
     assert np.isfinite(m.dataset["frequency_hz"].values).any() and "control" not in m.dataset
     assert "no change test" in str(m)
+
+
+def test_what_limits_the_tests_is_said_not_silent(campaign, serial):
+    # two records without a temperature (one in the reference period), two without a time
+    records = [type(r)(**{**r.__dict__, "covariates": {} if k in (2, 18) else r.covariates,
+                          "time": None if k in (5, 6) else r.time}) for k, r in enumerate(campaign.records)]
+    with pytest.warns(modaluq.ModalUQWarning) as caught:
+        m = monitor(records, settings=SETTINGS, progress=False, tracking=TrackingSettings(reference_records=8))
+    said = [str(w.message) for w in caught]
+    assert any("2 records have no value of a covariate (temperature)" in w and "not tested" in w
+               and "1 of the 8 reference records" in w for w in said), said
+    assert any("2 of 24 identified records have no time (record-0005, record-0006)" in w for w in said), said
+    ds = m.dataset
+    # the records without a time come last, in the order given; the others by time
+    assert list(ds["record"].values[-2:]) == ["record-0005", "record-0006"]
+    assert np.isnat(ds["time"].values[-2:]).all() and not np.isnat(ds["time"].values[:-2]).any()
+    # the record without a temperature after the reference is tracked but not tested, and the
+    # summary counts only the records tested
+    k = list(ds["record"].values).index("record-0018")
+    assert np.isfinite(ds["frequency_hz"].values[k]).any() and np.isnan(ds["control"].values[k]).all()
+    tested = int(np.isfinite(ds["control"].values[~ds["in_reference"].values, 0]).sum())
+    assert tested == 24 - 8 - 1
+    text = str(m)
+    assert f" of {tested}" in text and "note: 2 records have no value of a covariate" in text
+    assert "note:" not in m.summary(notes=False)
+    assert json.loads(ds.attrs["notes"]) == list(m.notes)
+    # a reference period that takes every record
+    with pytest.warns(modaluq.ModalUQWarning, match="takes all 5 identified records.*no record after it is tested"):
+        monitor(campaign.records[:5], settings=SETTINGS, progress=False)
+
+
+def test_a_covariate_table_must_name_the_records(csv_folder, tmp_path):
+    import pandas as pd
+
+    folder, _ = csv_folder
+    table = pd.read_csv(folder.with_name("site.covariates.csv"))
+    table.drop(columns="record").to_csv(tmp_path / "no_record.csv", index=False)  # a weather station's export
+    with pytest.raises(ValueError, match="covariates: the table needs a 'record' column"):
+        monitor(folder, covariates=tmp_path / "no_record.csv", out=tmp_path / "t.nc", progress=False)
+    table.assign(record="x" + table["record"]).to_csv(tmp_path / "other_names.csv", index=False)
+    with pytest.raises(ValueError, match="covariates: no row of the table is a record"):
+        monitor(folder, covariates=tmp_path / "other_names.csv", out=tmp_path / "t.nc", progress=False)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["no_record.csv", "other_names.csv"]  # nothing written
 
 
 def test_the_callers_warning_filters_are_the_same_after_a_thread_pool_run(campaign):
@@ -261,6 +309,12 @@ def test_bad_arguments_are_errors_naming_the_parameter(campaign, tmp_path):
         monitor(campaign.records[:3], workers=2, scheduler="tcp://localhost:1", progress=False)
     with pytest.raises(ValueError, match="pattern"):
         monitor(str(tmp_path / "*.csv"), progress=False)
+    # a mistyped folder: said so, and nothing written
+    with pytest.raises(ValueError, match="no such file or folder: .*nosuch"):
+        monitor(str(tmp_path / "nosuch") + "/", out=tmp_path / "t.nc", progress=False)
+    with pytest.raises(ValueError, match="no such file or folder"):
+        monitor(tmp_path / "nosuch", out=tmp_path / "t.nc", progress=False)
+    assert not list(tmp_path.iterdir())
 
 
 def test_plots_of_the_tracks(serial, tmp_path):
@@ -305,6 +359,24 @@ def test_cli_over_only_bad_files_exits_2_with_a_summary(tmp_path, capsys):
     assert err.count("failed: ") == 3
     assert main(["monitor", str(bad), "--out", str(tmp_path / "t.txt")]) == 2
     assert "--out" in capsys.readouterr().err
+    # an image type matplotlib cannot write is refused before any record is run
+    assert main(["monitor", str(bad), "--out", str(tmp_path / "u.nc"), "--plot", str(tmp_path / "f.xyz")]) == 2
+    assert "--plot" in capsys.readouterr().err and not (tmp_path / "u.parts").exists()
+
+
+def test_cli_whose_reader_stops_reading_exits_0_with_every_file_written(csv_folder, tmp_path, monkeypatch):
+    # modaluq monitor ... | head -1: the summary meets a closed pipe after the files are written
+    folder, _ = csv_folder
+    read_end, write_end = os.pipe()
+    os.close(read_end)
+    closed = os.fdopen(write_end, "w", buffering=1)
+    monkeypatch.setattr(sys, "stdout", closed)
+    out = tmp_path / "t.nc"
+    rc = main(["monitor", str(folder), "--out", str(out), "--orders", "2:24:2", "--reference-records", "10",
+               "--plot", str(tmp_path / "f.png"), "--plot-control-chart", str(tmp_path / "c.png"), "--no-progress"])
+    monkeypatch.undo()
+    closed.close()
+    assert rc == 0 and out.exists() and (tmp_path / "f.png").exists() and (tmp_path / "c.png").exists()
 
 
 # ------------------------------------------------------------------------------ Dask
@@ -323,18 +395,19 @@ def test_dask_local_cluster_gives_the_serial_results(dask_client, csv_folder, tm
     folder, _ = csv_folder
     files = record_files(folder)
     cov = folder.with_name("site.covariates.csv")
-    serial = monitor(files, settings=SETTINGS, threads=1, progress=False, covariates=cov)
-    on_dask = monitor(files, settings=SETTINGS, executor=dask_client, progress=False, covariates=cov)
+    eight = TrackingSettings(reference_records=8)
+    serial = monitor(files, settings=SETTINGS, threads=1, progress=False, covariates=cov, tracking=eight)
+    on_dask = monitor(files, settings=SETTINGS, executor=dask_client, progress=False, covariates=cov, tracking=eight)
     assert_same_tracks(serial, on_dask)
     # a corrupt file among them: reported, the others finish
     (tmp_path / "corrupt.npz").write_bytes(b"PK\x03\x04 not a zip")
     m = monitor(files + [tmp_path / "corrupt.npz"], settings=SETTINGS, executor=dask_client, progress=False,
-                covariates=cov)
+                covariates=cov, tracking=eight)
     assert m.n_failed == 1 and m.failures.iloc[0]["stage"] == "load"
     np.testing.assert_array_equal(m.dataset["frequency_hz"].values[:20], serial.dataset["frequency_hz"].values)
     # a running scheduler by its address: the same results
     by_address = monitor(files, settings=SETTINGS, scheduler=dask_client.scheduler.address, progress=False,
-                         covariates=cov)
+                         covariates=cov, tracking=eight)
     assert_same_tracks(serial, by_address)
 
 

@@ -259,7 +259,7 @@ inline Identification identify_with_factor(const Covariances& cov, Eigen::Matrix
             " s, less than half of the decay time 1/(2 pi f xi), up to ", longest_decay_s,
             " s); their standard deviations are less reliable: ",
             fitting >= 2 ? detail::concat("use n_blocks <= ", fitting)
-                         : std::string("the record is too short for these poles' decay; record longer")));
+                         : std::string("the record is too short for these poles' decay (a longer record is needed)")));
     }
     return out;
 }

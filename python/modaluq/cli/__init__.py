@@ -6,6 +6,7 @@ Errors in the user's input are one line on stderr and exit status 2, never a tra
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 
 from ..version import __version__
@@ -37,6 +38,12 @@ def main(argv=None) -> int:
         return exc.code
     try:
         return args.func(args)
+    except BrokenPipeError:
+        # the reader of stdout stopped (| head): the files were written before the summary, so
+        # this is no failure; send the rest of the output nowhere
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        return 0
     except (ValueError, TypeError, OSError, ImportError) as e:  # CliError is a ValueError
         message = " ".join(str(e).splitlines())  # one line even for a multi-line message
         print(f"modaluq {args.command}: error: {message}", file=sys.stderr)

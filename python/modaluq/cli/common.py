@@ -104,3 +104,19 @@ def option_error(exc: Exception, options) -> Exception:
     text = re.sub(r"^[a-z]+\b(?= and [a-z]+\b)|^[a-z]+\b", option, text)
     text = re.sub(r"^(--[a-z-]+ and )([a-z]+)\b", lambda m: m.group(1) + option(re.match(r".*", m.group(2))), text)
     return type(exc)(text)
+
+
+def check_image_paths(images) -> None:
+    """Refuse, before any work, an image (``(option, path)`` pairs; None skipped) whose folder does
+    not exist or whose type matplotlib cannot write."""
+    from matplotlib.backend_bases import FigureCanvasBase
+
+    for option, path in images:
+        if not path:
+            continue
+        parent = Path(path).resolve().parent
+        if not parent.is_dir():
+            raise OSError(f"{path}: directory {parent} does not exist")
+        ext = Path(path).suffix.lower().lstrip(".")
+        if ext not in FigureCanvasBase.get_supported_filetypes():
+            raise ValueError(f"{option} {path}: unsupported image type {ext or '(none)'!r}; use e.g. .png, .pdf, .svg")

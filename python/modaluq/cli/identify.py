@@ -20,7 +20,7 @@ from ..analysis import Analysis
 from ..checks import require
 from ..plot import plot_stabilization_diagram
 from ..version import __version__
-from .common import CliError, check_output_paths, integer_option, option_error, real_option
+from .common import CliError, check_image_paths, check_output_paths, integer_option, option_error, real_option
 from .options import add_analysis_options, analysis_settings
 
 __all__ = ["parse_orders", "parse_read_options", "register", "run"]
@@ -135,12 +135,7 @@ def _check_outputs(args):
         if not parent.is_dir():
             raise OSError(f"{p}: directory {parent} does not exist")
     check_output_paths(outputs, [args.file], overwrite=args.overwrite)
-    for opt, p in (("--plot", args.plot), ("--plot-shapes", args.plot_shapes)):
-        if p:
-            from matplotlib.backend_bases import FigureCanvasBase
-            ext = Path(p).suffix.lower().lstrip(".")
-            if ext not in FigureCanvasBase.get_supported_filetypes():
-                raise ValueError(f"{opt} {p}: unsupported image type {ext or '(none)'!r}; use e.g. .png, .pdf, .svg")
+    check_image_paths((("--plot", args.plot), ("--plot-shapes", args.plot_shapes)))
 
 
 def run(args) -> int:

@@ -10,12 +10,11 @@ from __future__ import annotations
 import argparse
 import sys
 import warnings
-from pathlib import Path
 
 from ..monitoring import monitor
 from ..tracking import TrackingSettings
 from ..version import __version__
-from .common import CliError, integer_option, option_error, real_option
+from .common import CliError, check_image_paths, integer_option, option_error, real_option
 from .identify import parse_orders, parse_read_options
 from .options import add_analysis_options, analysis_settings
 
@@ -39,9 +38,7 @@ def run(args) -> int:
             inflate_to_reference=args.inflate_to_reference)
     except (TypeError, ValueError) as exc:
         raise option_error(exc, options) from None
-    for plot in (args.plot, args.plot_control_chart):
-        if plot and not Path(plot).resolve().parent.is_dir():
-            raise OSError(f"{plot}: directory {Path(plot).resolve().parent} does not exist")
+    check_image_paths((("--plot", args.plot), ("--plot-control-chart", args.plot_control_chart)))
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
@@ -55,8 +52,17 @@ def run(args) -> int:
     except ValueError as exc:
         raise option_error(exc, options) from None
 
+    # every file first: a reader that stops reading the summary (| head) must not cost a plot
+    written = list(result.written)
+    if args.plot and result.reference is not None:
+        result.plot_frequencies().savefig(args.plot, dpi=args.dpi)
+        written.append(args.plot)
+    if args.plot_control_chart and result.reference is not None:
+        result.plot_control_chart().savefig(args.plot_control_chart, dpi=args.dpi)
+        written.append(args.plot_control_chart)
+
     print(f"modaluq {__version__} monitor: {result.n_records} records")
-    print(result)
+    print(result.summary(notes=False))
     failures = result.failures
     for row in failures.head(SHOWN_FAILURES).itertuples():
         print(f"modaluq monitor: failed: {row.source} ({row.stage}): {row.error}", file=sys.stderr)
@@ -79,18 +85,13 @@ def run(args) -> int:
                   f"z_xi {row.damping_change:+.1f}  {row.control:.1f}")
         if len(alarms) > 30:
             print(f"  ... {len(alarms) - 30} more (the store's alarm variable has them all)")
-    written = list(result.written)
-    if args.plot and result.reference is not None:
-        result.plot_frequencies().savefig(args.plot, dpi=args.dpi)
-        written.append(args.plot)
-    if args.plot_control_chart and result.reference is not None:
-        result.plot_control_chart().savefig(args.plot_control_chart, dpi=args.dpi)
-        written.append(args.plot_control_chart)
     for p in written:
         print(f"wrote {p}")
     if result.n_failed == result.n_records:
         raise CliError(f"no record could be identified ({result.n_failed} failed; the first: "
                        f"{failures.iloc[0]['source']}: {failures.iloc[0]['error']})")
+    for note in result.notes:
+        print(f"modaluq monitor: warning: {note}", file=sys.stderr)
     if result.reference is None:
         print(f"modaluq monitor: warning: no tracking: {result.dataset.attrs['tracking_error']}", file=sys.stderr)
     elif result.dataset.attrs.get("tracking_error"):
