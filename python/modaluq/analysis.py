@@ -33,7 +33,7 @@ from .identification import identify_quietly
 from .io import Recording, load
 from .preprocess import Preprocessed, preprocess
 from .provenance import provenance
-from .results import Result, warn_all
+from .results import ModalUQWarning, Result
 from .selection import SelectedModes, select_modes
 from .settings import ClusteringSettings, PoleStatus, Settings, StabilityCriteria
 from .stabilization import Diagram, stabilization_diagram
@@ -77,6 +77,36 @@ def describe_orders(orders) -> str:
         if len(steps) == 1:
             return f"{orders[0]}..{orders[-1]} step {steps.pop()} ({len(orders)} orders)"
     return ", ".join(map(str, orders))
+
+
+#: the identification's warning of poles whose decay outlasts the blocks (cpp/include/modaluq/identify.hpp)
+SLOW_DECAY = "decay more slowly than the blocks are long"
+
+
+def _warnings_of_selection(result: Result, selected: SelectedModes, fs: float) -> list:
+    """The identification's warnings, with the one on slowly decaying poles said of the selected
+    modes, by the core's rule (blocks shorter than half the decay time 1/(2π f ξ)): it counts every
+    pole of every order, mostly spurious ones with ξ near 0, and matters for a mode reported."""
+    out = list(result.warnings)
+    k = next((i for i, w in enumerate(out) if SLOW_DECAY in w), None)
+    if k is None or not selected.n_modes or not result.n_blocks:
+        return out
+    block_s = result.block_length / fs
+    f, xi = selected.frequency_hz, selected.damping_ratio
+    decay = np.full(f.shape, np.inf)
+    decay[xi > 0] = 1.0 / (2 * np.pi * f[xi > 0] * xi[xi > 0])
+    slow = (xi > 0) & (block_s < 0.5 * decay)
+    if not slow.any():
+        del out[k]
+        return out
+    longest = float(decay[slow].max())
+    fitting = int(result.n_blocks * result.block_length / fs / (0.5 * longest))
+    advice = (f"use n_blocks <= {fitting}" if fitting >= 2
+              else "the record is too short for their decay (a longer record is needed)")
+    out[k] = (f"{int(slow.sum())} of the {selected.n_modes} selected modes ({', '.join(f'{x:.4g}' for x in f[slow])} "
+              f"Hz) {SLOW_DECAY} (blocks of {block_s:.3g} s, less than half of the decay time 1/(2 pi f xi), up "
+              f"to {longest:.3g} s): their standard deviations are less reliable; {advice}")
+    return out
 
 
 @dataclass
@@ -216,6 +246,8 @@ class Analysis:
         the name of each step before it starts. The identification's warnings are kept in
         :attr:`warnings` and, with ``issue_warnings`` (default), issued as :class:`ModalUQWarning`;
         threads running analyses at once pass False (Python's warning filters are global state).
+        The warning of poles decaying more slowly than the blocks are long is said of the selected
+        modes (most such poles are spurious, with ξ near 0), and dropped when none of them is slow.
         """
         issue_warnings = check_boolean("issue_warnings", issue_warnings)
         step = progress or (lambda _: None)
@@ -226,14 +258,15 @@ class Analysis:
         result = identify_quietly(pre.y, pre.u, fs=pre.fs, settings=s, output_names=self.output_names)
         result.settings["preprocessing"] = pre.settings()  # what was done to the record's samples
         self.result = result
-        self.warnings = tuple(result.warnings)
-        if issue_warnings:
-            warn_all(result)
 
         step("stabilization diagram")
         self.diagram = stabilization_diagram(result, self.criteria, output_names=self.output_names)
         step("clustering")
         self.selected = select_modes(self.diagram, self.clustering)
+        self.warnings = tuple(_warnings_of_selection(result, self.selected, pre.fs))
+        if issue_warnings:
+            for w in self.warnings:
+                warnings.warn(w, ModalUQWarning, stacklevel=2)
         # rotating machinery: kurtosis of the response filtered around each mode (harmonics.py)
         if check_boolean("check_harmonics", check_harmonics) and self.selected.n_modes:
             self.harmonic_kurtosis = harmonic_kurtosis(pre.y, pre.fs, self.selected.frequency_hz)
