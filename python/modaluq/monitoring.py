@@ -56,6 +56,10 @@ __all__ = ["Monitoring", "RecordTask", "load_tracks", "monitor", "process_record
 #: Extensions a folder given to :func:`monitor` is searched for.
 RECORD_EXTENSIONS = tuple(sorted(SUPPORTED_EXTENSIONS))
 
+#: complex variables of the dataset, stored as their real and imaginary parts (NetCDF has no complex type)
+COMPLEX_SHAPES = {"mode_shape": "mode shape of the record, largest component 1",
+                  "reference_mode_shape": "mode shape of the reference, largest component 1"}
+
 _TIME_IN_NAME = re.compile(r"(\d{4})-?(\d{2})-?(\d{2})[T_ -]?(\d{2})[-:_h]?(\d{2})(?:[-:_m]?(\d{2}))?")
 
 
@@ -132,14 +136,17 @@ class TaskConfig:
 
 def _tasks(records, covariates) -> list:
     """Records (paths, folders, patterns, record objects) → tasks with names, times and covariates."""
-    if isinstance(records, (str, os.PathLike)):
+    if isinstance(records, (str, os.PathLike)) or _is_record_object(records):
         records = [records]
+    if isinstance(records, np.ndarray) or not hasattr(records, "__iter__"):
+        raise TypeError("records must be paths, folders, glob patterns or record objects (one, or a list of them); "
+                        f"got {type(records).__name__}")
     records = list(records)
     items = []
     for r in records:
         if isinstance(r, (str, os.PathLike)):
             items += [(p, None) for p in record_files([r])]
-        elif hasattr(r, "load") or (hasattr(r, "y") and hasattr(r, "fs")):
+        elif _is_record_object(r):
             items.append((None, r))
         else:
             raise TypeError(f"records: each record must be a path, a folder, a pattern, or an object with load() "
@@ -180,6 +187,10 @@ def _tasks(records, covariates) -> list:
         # time after them, in the order given (a note says so: _notes)
         tasks.sort(key=lambda t: (t.time is None, t.time if t.time is not None else np.datetime64(0, "s")))
     return tasks
+
+
+def _is_record_object(r) -> bool:
+    return hasattr(r, "load") or (hasattr(r, "y") and hasattr(r, "fs"))
 
 
 def _covariate_table(covariates) -> dict:
@@ -296,7 +307,7 @@ def _analysis(task: RecordTask, config: TaskConfig) -> Analysis:
     u = getattr(rec, "u", None)
     if u is not None and np.asarray(u).size == 0:
         u = None
-    names = getattr(rec, "output_names", None) or None
+    names = getattr(rec, "output_names", None) or getattr(task.source, "output_names", None) or None
     return Analysis.from_arrays(rec.y, u, fs=rec.fs, output_names=names, **common)
 
 
@@ -456,10 +467,10 @@ def _array(value, dtype=float):
 @contextlib.contextmanager
 def _executor(executor, threads, workers, scheduler):
     """``(executor, remote)``: the executor the tasks go to, and whether they run in other processes."""
-    given = sum(x is not None for x in (executor, workers, scheduler))
+    given = sum(x is not None for x in (executor, threads, workers, scheduler))
     if given > 1:
-        raise ValueError("give at most one of executor=, workers= and scheduler=")
-    if executor is None and workers is None and scheduler is None and "distributed" in sys.modules:
+        raise ValueError("give at most one of executor=, threads=, workers= and scheduler=")
+    if given == 0 and "distributed" in sys.modules:
         try:  # "use an active Client"
             executor = sys.modules["distributed"].default_client()
         except ValueError:
@@ -494,7 +505,7 @@ def _executor(executor, threads, workers, scheduler):
 # ------------------------------------------------------------------------------ the run
 
 
-@dataclass
+@dataclass(repr=False)
 class Monitoring:
     """The tracked modes of a batch of records: the dataset, the poles, the failures."""
 
@@ -517,16 +528,20 @@ class Monitoring:
         return len(self.failures)
 
     def alarms(self):
-        """The alarms as a table: record, time, mode, frequency, change statistics."""
-        ds = self.dataset
-        if ds.sizes["mode"] == 0:
-            import pandas as pd
+        """The alarms as a table: record, time, mode, frequency_hz, frequency_change,
+        damping_change (standardised), control (the statistic), sigma_confirmed (False: the mode's σ
+        is not confirmed by the reference period, its alarms are more frequent than the rate stated)."""
+        import pandas as pd
 
-            return pd.DataFrame(columns=["record", "time", "mode", "frequency_hz", "frequency_change",
-                                         "damping_change", "control"])
+        columns = ["record", "time", "mode", "frequency_hz", "frequency_change", "damping_change", "control",
+                   "sigma_confirmed"]
+        ds = self.dataset
+        if ds.sizes["mode"] == 0 or "control" not in ds:
+            return pd.DataFrame(columns=columns)
         df = ds[["frequency_hz", "frequency_change", "damping_change", "control", "alarm"]].to_dataframe()
         df = df[df["alarm"].astype(bool)].drop(columns="alarm").reset_index()
-        return df
+        df["sigma_confirmed"] = ds["sigma_confirmed"].sel(mode=df["mode"].values).values.astype(bool)
+        return df[columns]
 
     def plot_frequencies(self, **kwargs):
         """Tracked frequencies against time with ±σ bands and the alarms marked (a Figure)."""
@@ -538,6 +553,9 @@ class Monitoring:
 
     def __str__(self) -> str:
         return self.summary()
+
+    def __repr__(self) -> str:  # a notebook cell ending in the result shows the summary, not the Dataset
+        return f"<modaluq Monitoring: {self.n_records} records>\n{self.summary()}"
 
     def summary(self, notes: bool = True) -> str:
         """The run, the reference modes with their reduced χ² and alarm counts, and (``notes``)
@@ -606,17 +624,19 @@ def monitor(records, *, out=None, settings: Settings | None = None, criteria: St
 
     Parameters
     ----------
-    records : paths, folders, glob patterns, or record objects
+    records : paths, folders, glob patterns, or record objects (one, or a list)
         A record object has ``load()`` returning something with ``y``, ``fs`` (and optionally
-        ``u``, ``output_names``), or has those itself; its ``name``, ``time`` and ``covariates``
-        (a dict) are used when present (:class:`~modaluq.monitoring_simulator.SimulatedRecord`).
-        Records are processed in the order given, or by time when every record has one (from
-        the object, the covariate table, or the file name: ``..._2026-03-01_12-00-00.csv``).
+        ``u``, ``output_names``), or has those itself; its ``name``, ``time``, ``covariates``
+        (a dict) and ``output_names`` are used when present
+        (:class:`~modaluq.monitoring_simulator.SimulatedRecord`). Records are taken by time
+        where it is known (from the object, the covariate table, or the file name:
+        ``..._2026-03-01_12-00-00.csv``); records without a time come after them in the order
+        given (a note says so), a folder's files by name.
     out : path, optional
         ``.nc`` (NetCDF) or ``.zarr`` store of the tracks; beside it ``<stem>.failures.csv``, the
         pole table ``<stem>.poles.csv`` (or ``poles=``, ``.csv`` or ``.parquet``) and the part
-        files ``<stem>.parts/`` that make a run restartable. Without ``out`` nothing is written
-        and nothing is resumed.
+        files ``<stem>.parts/`` that make a run restartable (a ``.nc`` and a ``.zarr`` store of
+        one stem share them). Without ``out`` nothing is written and nothing is resumed.
     settings, criteria, clustering :
         As for :class:`~modaluq.Analysis` / ``modaluq identify``: the same for every record.
     tracking : TrackingSettings, optional
@@ -630,10 +650,11 @@ def monitor(records, *, out=None, settings: Settings | None = None, criteria: St
         Flag the modes that may be harmonics of the excitation (``possible_harmonic``); it filters
         each record around each mode, about the cost of the identification itself.
     executor, threads, workers, scheduler :
-        Where the records run: by default a pool of ``threads`` threads (default: the cores)
-        in this process, or an active Dask client; ``executor=`` a
-        :class:`concurrent.futures.Executor` or a ``dask.distributed.Client``; ``workers=N`` a
-        Dask ``LocalCluster`` of N one-thread processes; ``scheduler="tcp://host:port"``.
+        Where the records run (give at most one): ``threads=N`` a pool of N threads in this
+        process; ``executor=`` a :class:`concurrent.futures.Executor` or a
+        ``dask.distributed.Client``; ``workers=N`` a Dask ``LocalCluster`` of N one-thread
+        processes; ``scheduler="tcp://host:port"``. None of them: an active Dask client if
+        there is one, else a thread pool of one thread per core.
     resume : bool, default True
         Skip the records whose part file says they are done (failed ones are run again). False:
         start again, the part files of earlier runs (whatever their settings) are removed first.
@@ -643,6 +664,9 @@ def monitor(records, *, out=None, settings: Settings | None = None, criteria: St
     Returns
     -------
     Monitoring
+        Its :attr:`~Monitoring.notes` (also issued as :class:`ModalUQWarning`) say what limits the
+        tests: records without a time or a covariate value, a reference period that takes every
+        record, modes whose σ the reference period does not confirm.
     """
     t0 = time.perf_counter()
     resume = check_boolean("resume", resume)
@@ -823,6 +847,10 @@ def _consolidate(tasks, parts, tracking: TrackingSettings) -> Monitoring:
         except ValueError as exc:  # the records stay identified and tracked; only the test is missing
             error = f"no change test: {exc}"
 
+    miscalibrated = None  # (modes whose σ the reference does not confirm, the quantile)
+    if test is not None:
+        miscalibrated = _miscalibrated(test.reference_reduced_chi2_frequency, test.reference_reduced_chi2_damping,
+                                       int(in_ref.sum()), 1 + len(cov_names))
     rec_dims, rm, rcm = ("record",), ("record", "mode"), ("record", "channel", "mode")
     data = {
         "status": (rec_dims, np.array([p["status"] for p in parts], dtype=object)),
@@ -840,6 +868,7 @@ def _consolidate(tasks, parts, tracking: TrackingSettings) -> Monitoring:
         "frequency_damping_correlation": (rm, RHO), "mac_to_reference": (rm, MAC),
         "assignment_distance": (rm, DIST, {"long_name": "Mahalanobis distance squared to the reference mode"}),
         "n_poles": (rm, NP), "possible_harmonic": (rm, HARM),
+        "mode_shape": (rcm, SH, {"long_name": COMPLEX_SHAPES["mode_shape"]}),
         "mode_shape_real": (rcm, SH.real), "mode_shape_imag": (rcm, SH.imag),
         "mode_shape_std_real": (rcm, SHR), "mode_shape_std_imag": (rcm, SHI),
     }
@@ -858,6 +887,10 @@ def _consolidate(tasks, parts, tracking: TrackingSettings) -> Monitoring:
             "reference_reduced_chi2": (("mode",), test.reference_reduced_chi2),
             "reference_reduced_chi2_frequency": (("mode",), test.reference_reduced_chi2_frequency),
             "reference_reduced_chi2_damping": (("mode",), test.reference_reduced_chi2_damping),
+            "sigma_confirmed": (("mode",), ~miscalibrated[0],
+                                {"long_name": "the reference reduced chi2 of f and xi is within its 99.9 % "
+                                              "quantile (false: sigma too small here or a covariate missing; "
+                                              "alarms too frequent)"}),
             "frequency_coefficients": (("mode", "term"), test.coefficients_frequency,
                                        {"units": "Hz (constant), Hz per covariate unit (the others)"}),
             "damping_coefficients": (("mode", "term"), test.coefficients_damping,
@@ -869,13 +902,16 @@ def _consolidate(tasks, parts, tracking: TrackingSettings) -> Monitoring:
         data.update({
             "reference_frequency_hz": (("mode",), ref.frequency_hz, {"units": "Hz"}),
             "reference_damping_ratio": (("mode",), ref.damping_ratio, {"units": "1"}),
+            "reference_mode_shape": (("channel", "mode"), ref.mode_shape,
+                                     {"long_name": COMPLEX_SHAPES["reference_mode_shape"]}),
             "reference_mode_shape_real": (("channel", "mode"), ref.mode_shape.real),
             "reference_mode_shape_imag": (("channel", "mode"), ref.mode_shape.imag),
             "reference_presence": (("mode",), ref.presence),
             "frequency_scatter": (("mode",), ref.frequency_scatter, {"units": "Hz"}),
             "damping_scatter": (("mode",), ref.damping_scatter, {"units": "1"}),
         })
-    coords = {"record": [t.name for t in tasks], "time": (rec_dims, times),
+    # nanoseconds: what a NetCDF or Zarr store gives back, so the dataset equals the store read again
+    coords = {"record": [t.name for t in tasks], "time": (rec_dims, times.astype("datetime64[ns]")),
               "mode": np.arange(1, k_modes + 1), "channel": list(channels)}
     if test is not None:
         coords["term"] = ["constant"] + cov_names
@@ -883,7 +919,7 @@ def _consolidate(tasks, parts, tracking: TrackingSettings) -> Monitoring:
              "false_alarm_rate": tracking.false_alarm_rate,
              "smoothing": tracking.smoothing, "tracking": json.dumps(tracking.to_dict()),
              "covariate_names": json.dumps(cov_names), "tracking_error": error}
-    notes = _notes(tasks, done, in_ref, X, cov_names, tracking, test)
+    notes = _notes(tasks, done, in_ref, X, cov_names, tracking, miscalibrated)
     attrs["notes"] = json.dumps(notes)
     ds = xr.Dataset(data, coords=coords, attrs=attrs)
     ds["status"] = ds["status"].astype(str)
@@ -920,14 +956,13 @@ def _names(tasks, which, shown=3) -> str:
     return ", ".join(tasks[i].name for i in k[:shown]) + (f" and {len(k) - shown} more" if len(k) > shown else "")
 
 
-def _notes(tasks, done, in_ref, X, cov_names, tracking: TrackingSettings, test) -> list:
+def _notes(tasks, done, in_ref, X, cov_names, tracking: TrackingSettings, miscalibrated) -> list:
     """What limits the run's tests, said rather than silent: records without a time among
     records with one, a reference period that takes every record, records without covariates,
     modes whose σ the reference period does not confirm."""
     notes = []
-    if test is not None:
-        flagged, high = _miscalibrated(test.reference_reduced_chi2_frequency, test.reference_reduced_chi2_damping,
-                                       int(in_ref.sum()), 1 + len(cov_names))
+    if miscalibrated is not None:
+        flagged, high = miscalibrated
         if flagged.any():
             modes = ", ".join(str(j + 1) for j in np.flatnonzero(flagged))
             then = ("their covariances were scaled up to it (inflate_to_reference)" if tracking.inflate_to_reference
@@ -946,15 +981,16 @@ def _notes(tasks, done, in_ref, X, cov_names, tracking: TrackingSettings, test) 
     if cov_names:
         lacking = done & ~np.all(np.isfinite(X), axis=1)
         if lacking.any():
-            ref_part = (f"; {int((lacking & in_ref).sum())} of the {int(in_ref.sum())} reference records are left "
-                        "out of the fit" if (lacking & in_ref).any() else "")
+            n_ref = int((lacking & in_ref).sum())
+            ref_part = (f"; {n_ref} of the {int(in_ref.sum())} reference records {'is' if n_ref == 1 else 'are'} "
+                        "left out of the fit" if n_ref else "")
             notes.append(f"{int(lacking.sum())} records have no value of a covariate ({', '.join(cov_names)}) "
                          f"({_names(tasks, lacking)}): they are tracked but not tested, no alarm is possible{ref_part}")
     return notes
 
 
 def _write(result: Monitoring, paths: dict) -> tuple:
-    ds = result.dataset
+    ds = result.dataset.drop_vars(list(COMPLEX_SHAPES), errors="ignore")  # stored as real and imaginary parts
     store = paths["store"]
     tmp = store.with_name(f".{store.name}.{os.getpid()}.tmp")
     if paths["kind"] == "netcdf":
@@ -990,9 +1026,10 @@ def load_tracks(path):
     ds = xr.open_zarr(path) if path.suffix.lower() == ".zarr" else xr.open_dataset(path)
     ds = ds.load()
     ds.close()
-    for name in ("mode_shape", "reference_mode_shape"):
+    for name, long_name in COMPLEX_SHAPES.items():
         if f"{name}_real" in ds:
             ds[name] = ds[f"{name}_real"] + 1j * ds[f"{name}_imag"]
+            ds[name].attrs["long_name"] = long_name
     if "alarm" in ds:
         ds["alarm"] = ds["alarm"].astype(bool)
     return ds

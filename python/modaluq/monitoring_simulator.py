@@ -46,6 +46,11 @@ class SimulatedRecord:
     index: int                 #: record index (the random stream is ``SeedSequence(seed, spawn_key=(index,))``)
     simulation: dict = field(default_factory=dict)  #: further keywords of :func:`modaluq.simulate`
 
+    @property
+    def output_names(self) -> tuple:
+        """``acc1``, ``acc2``, ...: the measured degrees of freedom (1-based), the names its files get too."""
+        return channel_names(self.simulation["output_dofs"])
+
     def load(self) -> Simulation:
         """The record's samples (:class:`~modaluq.Simulation`, output-only: ``u`` has no column)."""
         rng = np.random.default_rng(np.random.SeedSequence(self.seed, spawn_key=(self.index,)))
@@ -76,7 +81,8 @@ class MonitoringSimulation:
 
     def write(self, folder, *, format: str = "csv", covariates=None) -> list:
         """Write every record to ``folder`` (``csv``: a time column and one column per output;
-        ``npz``: ``y`` and ``fs``) and the covariates to ``covariates`` (default
+        ``npz``: ``y``, ``fs`` and ``channel_names``; the channels are named as
+        :attr:`SimulatedRecord.output_names`) and the covariates to ``covariates`` (default
         ``<folder>.covariates.csv`` beside the folder; columns ``record``, ``time``,
         ``temperature``). Returns the record paths, in time order."""
         if format not in ("csv", "npz"):
@@ -87,11 +93,12 @@ class MonitoringSimulation:
         for rec in self.records:
             sim = rec.load()
             path = folder / f"{rec.name}.{format}"
+            names = channel_names(sim.output_dofs)
             if format == "npz":
-                np.savez(path, y=sim.y, fs=sim.fs)
+                np.savez(path, y=sim.y, fs=sim.fs, channel_names=np.array(names))
             else:
                 t = np.arange(sim.n_samples) / sim.fs
-                header = "time [s]," + ",".join(f"acc{d + 1}" for d in sim.output_dofs)
+                header = "time [s]," + ",".join(names)
                 np.savetxt(path, np.column_stack([t, sim.y]), delimiter=",", header=header, comments="", fmt="%.9g")
             paths.append(path)
         covariates = Path(covariates) if covariates is not None else folder.with_name(folder.name + ".covariates.csv")
@@ -209,6 +216,11 @@ def simulate_monitoring(n_records: int = 200, *, interval_s: float = 3600.0, sta
     return MonitoringSimulation(records=tuple(records), time=times, temperature=temperature, damaged=damaged,
                                 frequency_hz=np.array(freqs), damping_ratio=np.array(damps),
                                 mode_shape=np.array(shapes), fs=fs)
+
+
+def channel_names(output_dofs) -> tuple:
+    """The channels of a campaign's records: ``acc`` and the 1-based degree of freedom."""
+    return tuple(f"acc{int(d) + 1}" for d in output_dofs)
 
 
 def springs_of(K: np.ndarray) -> np.ndarray:

@@ -388,7 +388,9 @@ def plot_control_chart(ds, fig=None, *, modes=None, figsize=None):
         if alarm.any():
             ax.plot(x[alarm], c[alarm], "v", color="tab:red", ms=4, label="alarm")
         ax.set_ylabel(f"mode {mode}\nχ²")
-        top = np.nanmax(np.concatenate([c, limit]), initial=10.0) if np.isfinite(limit).any() else 10.0
+        # every point on the axis: the records' own χ² can exceed the smoothed statistic by far
+        shown = np.concatenate([c, limit, d["chi2"].values])
+        top = np.nanmax(shown[np.isfinite(shown)], initial=10.0)
         ax.set_ylim(1e-2, 2 * top)
         ax.grid(alpha=0.3, which="major")
     _finish_track_axes(fig, axes, xlabel, ncol=4)

@@ -51,7 +51,31 @@ SHAPE_VARIANCE_FLOOR = 1e-6
 
 @dataclass(frozen=True)
 class TrackingSettings:
-    """How records are tracked and tested; every field has a documented default."""
+    """How records are tracked and tested (docs/monitoring.md §3, §4).
+
+    Attributes
+    ----------
+    reference_records : int, default 20
+        The first K records identified form the reference period (unless ``reference_span``).
+    reference_span : (start, end), optional
+        The records whose time lies in this span (inclusive; strings, ``datetime64`` or
+        ``datetime``, anything :class:`numpy.datetime64` reads) form the reference period instead.
+    min_mac : float, default 0.8
+        Gate of the assignment: the smallest MAC between a record's mode and a reference mode.
+    max_frequency_deviation : float, default 0.1
+        Gate of the assignment: the largest |Δf|/f (wide, so that a damage does not lose its mode).
+    min_presence : float, default 0.5
+        A reference mode is selected in at least this fraction of the reference records.
+    reference_distance : float, default 0.05
+        Clustering cut of the reference period's modes on |Δf|/f + (1 − MAC).
+    false_alarm_rate : float, default 0.01
+        Probability of an alarm at one record and mode when nothing changed.
+    smoothing : float, default 0.3
+        EWMA weight of the newest record in the control statistic (1: each record on its own).
+    inflate_to_reference : bool, default False
+        Scale each mode's covariances by its reference reduced χ² (over f and ξ) when that is
+        above its calibrated value ν/(ν − 2).
+    """
 
     #: the first K successful records form the reference period (unless ``reference_span``)
     reference_records: int = 20

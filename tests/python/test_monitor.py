@@ -1,5 +1,6 @@
 """modaluq.monitor and ``modaluq monitor``: the batch, its part files, executors and stores."""
 
+import concurrent.futures
 import json
 import os
 import signal
@@ -83,6 +84,10 @@ def test_store_round_trip_netcdf_zarr_parquet(serial, campaign, tmp_path):
     assert m.n_run == 24 and set(m.written) == {str(out), str(tmp_path / "poles.parquet"),
                                                str(tmp_path / "tracks.failures.csv")}
     back = load_tracks(out)
+    # the store read again is the dataset (complex shapes rebuilt, times in ns, booleans back)
+    import xarray as xr
+
+    xr.testing.assert_identical(back, m.dataset)
     np.testing.assert_array_equal(back["mode_shape"].values, serial.dataset["mode_shape_real"].values
                                   + 1j * serial.dataset["mode_shape_imag"].values)
     assert back["mode_shape"].dtype == complex and back["alarm"].dtype == bool
@@ -93,8 +98,7 @@ def test_store_round_trip_netcdf_zarr_parquet(serial, campaign, tmp_path):
     assert pd.read_parquet(tmp_path / "poles.parquet").shape == serial.poles.shape
     pytest.importorskip("zarr")
     z = monitor(campaign.records, settings=SETTINGS, out=tmp_path / "tracks.zarr", progress=False)
-    np.testing.assert_array_equal(load_tracks(tmp_path / "tracks.zarr")["mode_shape"].values,
-                                  back["mode_shape"].values)
+    xr.testing.assert_identical(load_tracks(tmp_path / "tracks.zarr"), m.dataset)
     assert z.n_run == 0  # the same stem: the part files of tracks.nc serve, nothing is identified again
 
 
@@ -198,7 +202,7 @@ def test_what_limits_the_tests_is_said_not_silent(campaign, serial):
         m = monitor(records, settings=SETTINGS, progress=False, tracking=TrackingSettings(reference_records=8))
     said = [str(w.message) for w in caught]
     assert any("2 records have no value of a covariate (temperature)" in w and "not tested" in w
-               and "1 of the 8 reference records" in w for w in said), said
+               and "1 of the 8 reference records is left out" in w for w in said), said
     assert any("2 of 24 identified records have no time (record-0005, record-0006)" in w for w in said), said
     ds = m.dataset
     # the records without a time come last, in the order given; the others by time
@@ -309,6 +313,10 @@ def test_bad_arguments_are_errors_naming_the_parameter(campaign, tmp_path):
         monitor(campaign.records[:3], tracking={"smoothing": 1}, progress=False)
     with pytest.raises(ValueError, match="at most one of"):
         monitor(campaign.records[:3], workers=2, scheduler="tcp://localhost:1", progress=False)
+    with pytest.raises(ValueError, match="at most one of executor=, threads="):  # not silently one of them
+        monitor(campaign.records[:3], threads=1, executor=concurrent.futures.ThreadPoolExecutor(1), progress=False)
+    with pytest.raises(TypeError, match="records must be"):
+        monitor(np.zeros((3, 1000)), progress=False)
     with pytest.raises(ValueError, match="pattern"):
         monitor(str(tmp_path / "*.csv"), progress=False)
     # a mistyped folder: said so, and nothing written
@@ -325,6 +333,28 @@ def test_plots_of_the_tracks(serial, tmp_path):
     fig.savefig(tmp_path / "f.png")
     fig = serial.plot_control_chart()
     assert len(fig.axes) == 6 and fig.axes[0].get_yscale() == "log"
+    for ax, mode in zip(fig.axes, serial.dataset["mode"].values):  # every record's χ² is on its axis
+        assert np.nanmax(serial.dataset["chi2"].sel(mode=mode).values) <= ax.get_ylim()[1]
+
+
+def test_the_summary_is_what_a_notebook_shows_and_alarms_carry_the_modes_calibration(serial):
+    assert repr(serial).startswith("<modaluq Monitoring: 24 records>\n24 records: 24 identified")
+    alarms = serial.alarms()
+    assert list(alarms.columns) == ["record", "time", "mode", "frequency_hz", "frequency_change", "damping_change",
+                                    "control", "sigma_confirmed"]
+    confirmed = serial.dataset["sigma_confirmed"].values
+    assert alarms["sigma_confirmed"].tolist() == [bool(confirmed[m - 1]) for m in alarms["mode"]]
+    assert len(alarms) == int(serial.dataset["alarm"].values.sum())
+
+
+def test_a_single_record_and_simulated_files_and_objects_name_their_channels_alike(campaign, tmp_path):
+    with pytest.warns(modaluq.ModalUQWarning, match="takes all 1 identified records"):
+        assert monitor(campaign.records[0], settings=SETTINGS, progress=False, threads=1).n_records == 1
+    files = campaign.write(tmp_path / "site", format="npz")
+    m = monitor([files[0], *campaign.records[1:4]], settings=SETTINGS, progress=False, threads=1,
+                covariates=tmp_path / "site.covariates.csv", tracking=TrackingSettings(reference_records=3))
+    assert m.n_failed == 0 and list(m.dataset["channel"].values) == list(campaign.records[0].output_names)
+    assert campaign.records[0].output_names == ("acc1", "acc2", "acc5")
 
 
 # ------------------------------------------------------------------------------ command line
