@@ -31,11 +31,32 @@ def serial(campaign):
     return monitor(campaign.records, settings=SETTINGS, threads=1, progress=False)
 
 
-def assert_same_tracks(a, b):
+def assert_same_tracks(a, b, *, other_process=False):
+    """The same tracks. Within one process, bit for bit. Across processes the identification
+    (f, ξ, shapes), the assignment and the alarms are bit for bit the same, and σ and what is
+    computed from it agree to rounding: the BLAS's last bits in the uncertainty propagation
+    depend on the process (measured: 8e-14 relative between the pytest process and a Dask worker)."""
     import xarray as xr
 
-    xr.testing.assert_identical(a.dataset, b.dataset)
-    assert a.poles.equals(b.poles)
+    if not other_process:
+        xr.testing.assert_identical(a.dataset, b.dataset)
+        assert a.poles.equals(b.poles)
+        return
+    ds_a, ds_b = a.dataset, b.dataset
+    assert set(ds_a.variables) == set(ds_b.variables) and ds_a.attrs == ds_b.attrs
+    exact = {"frequency_hz", "damping_ratio", "mode_shape", "mode_shape_real", "mode_shape_imag", "alarm",
+             "reference_frequency_hz", "reference_damping_ratio", "reference_mode_shape", "n_poles"}
+    for name in ds_a.variables:
+        x, y = ds_a[name].values, ds_b[name].values
+        if name in exact or not np.issubdtype(x.dtype, np.floating):
+            np.testing.assert_array_equal(x, y, err_msg=name)
+        else:
+            np.testing.assert_allclose(x, y, rtol=1e-10, atol=0, equal_nan=True, err_msg=name)
+    for column in a.poles.columns:
+        if a.poles[column].dtype.kind == "f" and column.endswith("_std"):
+            np.testing.assert_allclose(a.poles[column], b.poles[column], rtol=1e-10, err_msg=column)
+        else:
+            assert a.poles[column].equals(b.poles[column]), column
 
 
 # ------------------------------------------------------------------------------ simulator
@@ -430,7 +451,7 @@ def test_dask_local_cluster_gives_the_serial_results(dask_client, csv_folder, tm
     eight = TrackingSettings(reference_records=8)
     serial = monitor(files, settings=SETTINGS, threads=1, progress=False, covariates=cov, tracking=eight)
     on_dask = monitor(files, settings=SETTINGS, executor=dask_client, progress=False, covariates=cov, tracking=eight)
-    assert_same_tracks(serial, on_dask)
+    assert_same_tracks(serial, on_dask, other_process=True)
     # a corrupt file among them: reported, the others finish
     (tmp_path / "corrupt.npz").write_bytes(b"PK\x03\x04 not a zip")
     m = monitor(files + [tmp_path / "corrupt.npz"], settings=SETTINGS, executor=dask_client, progress=False,
@@ -440,7 +461,7 @@ def test_dask_local_cluster_gives_the_serial_results(dask_client, csv_folder, tm
     # a running scheduler by its address: the same results
     by_address = monitor(files, settings=SETTINGS, scheduler=dask_client.scheduler.address, progress=False,
                          covariates=cov, tracking=eight)
-    assert_same_tracks(serial, by_address)
+    assert_same_tracks(serial, by_address, other_process=True)
 
 
 @pytest.mark.slow
