@@ -38,7 +38,10 @@ def make_records(folder: Path, n_records: int, n_channels: int, n_samples: int) 
     folder.mkdir(parents=True, exist_ok=True)
     paths = []
     for k in range(n_records):
-        path = folder / f"rec_2026-01-01_{k // 6:02d}-{(k % 6) * 10:02d}-00_{k:04d}.npz"
+        # one record every 10 minutes from 2026-01-01 00:00, the time in the name (days roll over:
+        # an hour 24 is no time, and monitor would say so)
+        start = str(np.datetime64("2026-01-01T00:00:00") + np.timedelta64(10 * k, "m"))
+        path = folder / f"rec_{start.replace('T', '_').replace(':', '-')}_{k:04d}.npz"
         if not path.exists():
             sim = simulate(n_samples, seed=k, n_dof=n_channels, output_dofs=tuple(range(n_channels)), input_dofs=(),
                            input_std=1.0, unknown_input_std=1.0, fs=100.0)
