@@ -159,6 +159,22 @@ def test_cli_help_shows_the_library_defaults():
         assert f"{option} (default {value:g})" in text
 
 
+def test_monitor_and_validate_options_default_to_the_library():
+    from modaluq.cli.validate import DEFAULTS
+    from modaluq.tracking import TrackingSettings
+
+    commands = build_parser()._subparsers._group_actions[0].choices
+    args = build_parser().parse_args(["monitor", "records/", "--out", "t.nc"])
+    assert all(getattr(args, option) is None for option in ("reference_records", "false_alarm_rate", "smoothing",
+                                                             "tracking_min_mac"))
+    text = " ".join(commands["monitor"].format_help().split())
+    t = TrackingSettings()
+    assert f"reference period (default {t.reference_records})" in text
+    assert f"reference mode (default {t.min_mac:g})" in text
+    assert DEFAULTS["noise_coupling_limit"] == Settings().noise_coupling_limit
+    assert DEFAULTS["freeze_noise"] == Settings().freeze_noise
+
+
 # --------------------------------------------------------------------------- a default changed in C++
 
 #: Loads the extension without running modaluq/__init__ (which imports settings), replaces three
@@ -207,7 +223,9 @@ PATCHED_CORE = textwrap.dedent("""
     parser = build_parser()
     s, c, k = analysis_settings(parser.parse_args(["identify", "x.csv"]))
     out["cli"] = {"settings": s.to_dict(), "criteria": c.to_dict(), "clustering": k.to_dict()}
-    out["help"] = " ".join(parser._subparsers._group_actions[0].choices["identify"].format_help().split())
+    commands = parser._subparsers._group_actions[0].choices
+    out["help"] = " ".join(commands["identify"].format_help().split())
+    out["validate_help"] = " ".join(commands["validate"].format_help().split())
     record, report = sys.argv[1], sys.argv[2]
     import numpy as np
     np.savez(record, y=sim.y, fs=sim.fs)
@@ -232,6 +250,7 @@ def test_a_default_changed_in_the_core_changes_settings_identify_and_the_cli(tmp
     assert "smallest MAC between orders (default 0.9)" in out["help"]
     assert "(default off; 0 switches it off)" in out["help"]  # --frequency-std-factor
     assert "(1 - MAC) (default 0.03)" in out["help"]
+    assert "inflate more than this (default 7.5)" in out["validate_help"]  # monte_carlo's is Settings'
     assert out["cli_status"] == 0
     stamp = json.loads(report.read_text())["stamp"]["settings"]
     assert stamp["identification"]["noise_coupling_limit"] == 7.5
