@@ -163,7 +163,8 @@ class Settings:
     30
     """
 
-    # None: chosen from the data (auto_settings), whatever the core's placeholder (0, empty, 50 blocks)
+    # block_rows, orders, n_blocks: None = chosen from the data (auto_settings); the core's
+    # placeholders (0, empty, 50 blocks) are not defaults. The other fields the core has: its defaults.
     block_rows: Optional[int] = None                 #: future block rows p (>= 2)
     past_block_rows: Optional[int] = _IDENTIFY["past_block_rows"]  #: past block rows q (None: p)
     orders: Optional[Tuple[int, ...]] = None         #: model orders, ascending, distinct
