@@ -10,6 +10,13 @@
 
 Every check names the field at fault (``TypeError`` for the wrong kind of value, ``ValueError``
 for a value out of range), as :mod:`modaluq.checks` does everywhere.
+
+One source per default: a field that the core's options struct also has (same name:
+``IdentifyOptions``, ``StabilityCriteria``, ``ClusteringOptions``) takes its default from the
+struct as the core constructs it (:func:`core_defaults`), and ``to_core``/``to_dict`` loop over
+the fields. Where the core writes "not set" or an enum differently, :data:`_CODECS` translates,
+in one place. Only what the core does not know keeps a Python default (the preprocessing, and
+``block_rows``/``orders``/``n_blocks``, chosen from the data when None).
 """
 
 from __future__ import annotations
@@ -17,12 +24,13 @@ from __future__ import annotations
 import dataclasses
 import enum
 from dataclasses import dataclass, fields
-from typing import Optional, Tuple
+from typing import Callable, NamedTuple, Optional, Tuple
 
 from . import _core
 from .checks import MAX_THREADS, check_boolean, check_integer, check_integers, check_real, check_sampling_frequency
 
-__all__ = ["ClusteringSettings", "PoleStatus", "Settings", "StabilityCriteria", "CORE_OF_STATUS", "STATUS_OF_CORE"]
+__all__ = ["ClusteringSettings", "PoleStatus", "Settings", "StabilityCriteria", "CORE_OF_STATUS", "STATUS_OF_CORE",
+           "core_defaults", "core_fields"]
 
 
 class PoleStatus(str, enum.Enum):
@@ -57,6 +65,80 @@ STATUS_OF_CORE = {
 CORE_OF_STATUS = {v: k for k, v in STATUS_OF_CORE.items()}
 
 
+# --------------------------------------------------------------------------- the seam with the core's structs
+
+
+class _Codec(NamedTuple):
+    """How one field crosses between the core's struct and the dataclass."""
+
+    to_python: Callable
+    to_core: Callable
+
+
+#: Fields the core writes differently from Python ("not set" as 0 or empty, enums); every other
+#: field crosses as it is (an empty ``std::optional`` is already None).
+_CODECS = {
+    # 0 / empty: "not set" (q = p, every output, the automatic size); None in Python
+    "block_rows": _Codec(lambda v: int(v) or None, lambda v: int(v or 0)),
+    "past_block_rows": _Codec(lambda v: int(v) or None, lambda v: int(v or 0)),
+    "min_cluster_size": _Codec(lambda v: int(v) or None, lambda v: int(v or 0)),
+    "orders": _Codec(lambda v: tuple(v) or None, lambda v: list(v or ())),
+    "references": _Codec(lambda v: tuple(v) or None, lambda v: list(v or ())),
+    "statuses": _Codec(lambda v: tuple(STATUS_OF_CORE[s] for s in v), lambda v: [CORE_OF_STATUS[s] for s in v]),
+    "linkage": _Codec(lambda v: v.name, lambda v: getattr(_core.Linkage, v)),
+}
+
+
+def core_fields(core_type) -> tuple:
+    """The data fields of a bound core struct (its ``def_readwrite`` properties, in binding order)."""
+    names = {}
+    for klass in reversed(type.mro(core_type)):  # a Python subclass of the struct keeps its fields
+        names.update((k, None) for k, v in vars(klass).items() if type(v) is property)  # not static ones
+    return tuple(names)
+
+
+def core_defaults(core_type) -> dict:
+    """Every field of the core struct ``core_type`` as it constructs it, in Python's terms (None
+    for "not set", :class:`PoleStatus`, linkage names): the defaults of the dataclasses.
+
+    >>> core_defaults(_core.StabilityCriteria)["min_mac"] == StabilityCriteria().min_mac
+    True
+    """
+    made = core_type()
+    return {name: _CODECS[name].to_python(getattr(made, name)) if name in _CODECS else getattr(made, name)
+            for name in core_fields(core_type)}
+
+
+def _crossing(cls, core_type) -> tuple:
+    """The dataclass's fields that the core struct has too (the dataclass's order)."""
+    core = set(core_fields(core_type))
+    return tuple(f.name for f in fields(cls) if f.name in core)
+
+
+def _to_core(obj, core_type, names):
+    """A default-constructed ``core_type`` with ``names`` set from the dataclass ``obj``."""
+    out = core_type()
+    for name in names:
+        value = getattr(obj, name)
+        if name in _CODECS:
+            value = _CODECS[name].to_core(value)
+        elif value is not None and isinstance(getattr(out, name), (bool, int, float)):
+            value = type(getattr(out, name))(value)  # the struct's kind: 1 for a double is 1.0
+        setattr(out, name, value)
+    return out
+
+
+def _exported(value):
+    """A field's value for ``to_dict``: tuples as lists, :class:`PoleStatus` as its text."""
+    if isinstance(value, tuple):
+        return [_exported(v) for v in value]
+    return value.value if isinstance(value, enum.Enum) else value
+
+
+#: The core's defaults, read once when modaluq is imported.
+_IDENTIFY = core_defaults(_core.IdentifyOptions)
+_CRITERIA = core_defaults(_core.StabilityCriteria)
+_CLUSTERING = core_defaults(_core.ClusteringOptions)
 
 
 # --------------------------------------------------------------------------- identification
@@ -81,17 +163,20 @@ class Settings:
     30
     """
 
+    # block_rows, orders, n_blocks: None = chosen from the data (auto_settings); the core's
+    # placeholders (0, empty, 50 blocks) are not defaults. The other fields the core has: its defaults.
     block_rows: Optional[int] = None                 #: future block rows p (>= 2)
-    past_block_rows: Optional[int] = None            #: past block rows q (default p)
+    past_block_rows: Optional[int] = _IDENTIFY["past_block_rows"]  #: past block rows q (None: p)
     orders: Optional[Tuple[int, ...]] = None         #: model orders, ascending, distinct
     n_blocks: Optional[int] = None                   #: blocks for the covariance of the covariances
-    references: Optional[Tuple[int, ...]] = None     #: output indices of the past (default all)
-    uncertainty: bool = True                         #: propagate the covariance to every parameter
-    demean: bool = True                              #: remove each channel's mean
-    input_rcond: float = 1e-10                       #: relative cut of the input covariance's pseudo-inverse
-    threads: int = 1                                 #: threads of the core (the result does not depend on it)
-    freeze_noise: bool = True                        #: hold the noise directions fixed (docs/uq-math.md §5.5)
-    noise_coupling_limit: float = 20.0               #: σ shrink factor that flags a noise-coupled pole
+    references: Optional[Tuple[int, ...]] = _IDENTIFY["references"]  #: output indices of the past (None: all)
+    uncertainty: bool = _IDENTIFY["uncertainty"]     #: propagate the covariance to every parameter
+    demean: bool = _IDENTIFY["demean"]               #: remove each channel's mean
+    input_rcond: float = _IDENTIFY["input_rcond"]    #: relative cut of the input covariance's pseudo-inverse
+    threads: int = _IDENTIFY["threads"]              #: threads of the core (the result does not depend on it)
+    freeze_noise: bool = _IDENTIFY["freeze_noise"]   #: hold the noise directions fixed (docs/uq-math.md §5.5)
+    noise_coupling_limit: float = _IDENTIFY["noise_coupling_limit"]  #: σ shrink factor that flags a noise-coupled pole
+    # preprocessing (preprocess.py), which the core does not know
     frequency_range: Optional[Tuple[float, float]] = None  #: band of interest (f_low, f_high), Hz
     start: Optional[float] = None                    #: window start, s from the first sample
     stop: Optional[float] = None                     #: window end, s
@@ -131,8 +216,7 @@ class Settings:
         return dataclasses.replace(self, **changes)
 
     def to_dict(self) -> dict:
-        return {f.name: (list(v) if isinstance(v, tuple) else v)
-                for f in fields(self) for v in (getattr(self, f.name),)}
+        return {f.name: _exported(getattr(self, f.name)) for f in fields(self)}
 
     def layout(self, n_outputs: int, n_inputs: int = 0) -> "_core.HankelLayout":
         """The core's Hankel layout of these horizons for ``n_outputs`` / ``n_inputs`` channels."""
@@ -155,38 +239,21 @@ class Settings:
         missing = [k for k in ("block_rows", "orders", "n_blocks") if getattr(self, k) is None]
         if missing:
             raise ValueError(f"{', '.join(missing)} not set: choose them (auto_settings.choose_settings) first")
-        o = _core.IdentifyOptions()
+        o = _to_core(self, _core.IdentifyOptions, _crossing(Settings, _core.IdentifyOptions))
         o.fs = check_sampling_frequency(fs)
-        o.block_rows = self.block_rows
-        o.past_block_rows = self.past_block_rows or 0
-        o.orders = list(self.orders)
-        o.n_blocks = self.n_blocks
-        o.references = list(self.references or ())
-        o.uncertainty = self.uncertainty
-        o.demean = self.demean
-        o.input_rcond = self.input_rcond
-        o.threads = self.threads
-        o.freeze_noise = self.freeze_noise
-        o.noise_coupling_limit = self.noise_coupling_limit
         o.validate()
         return o
 
     def record(self, fs: float, n_outputs: int) -> dict:
-        """What ``Result.settings`` keeps of the identification (defaults resolved)."""
-        return {
-            "fs": fs,
-            "block_rows": self.block_rows,
-            "past_block_rows": self.past_block_rows or self.block_rows,
-            "orders": list(self.orders),
-            "n_blocks": self.n_blocks if self.uncertainty else None,
-            "references": list(self.references or ()) or list(range(n_outputs)),
-            "uncertainty": self.uncertainty,
-            "demean": self.demean,
-            "input_rcond": self.input_rcond,
-            "threads": self.threads,
-            "freeze_noise": self.freeze_noise,
-            "noise_coupling_limit": self.noise_coupling_limit,
-        }
+        """What ``Result.settings`` keeps of the identification: ``fs`` and every field the core's
+        ``IdentifyOptions`` has, with what "not set" resolves to."""
+        resolved = {"past_block_rows": self.past_block_rows or self.block_rows,
+                    "n_blocks": self.n_blocks if self.uncertainty else None,
+                    "references": list(self.references or ()) or list(range(n_outputs))}
+        out = {"fs": fs}
+        for name in _crossing(Settings, _core.IdentifyOptions):
+            out[name] = resolved[name] if name in resolved else _exported(getattr(self, name))
+        return out
 
 
 # --------------------------------------------------------------------------- diagram and selection
@@ -253,16 +320,16 @@ class StabilityCriteria:
         Largest relative frequency distance to a pole of the previous order that can be its match.
     """
 
-    max_frequency_change: float = 0.01
-    max_damping_change: float = 0.10
-    min_mac: float = 0.98
-    frequency_std_factor: float | None = 2.0
-    max_frequency_cov: float | None = 0.05
-    min_damping_ratio: float = 0.0
-    max_damping_ratio: float = 0.20
-    damping_std_factor: float | None = 2.0
-    max_damping_change_with_std: float = 0.5
-    match_window: float = 0.05
+    max_frequency_change: float = _CRITERIA["max_frequency_change"]
+    max_damping_change: float = _CRITERIA["max_damping_change"]
+    min_mac: float = _CRITERIA["min_mac"]
+    frequency_std_factor: float | None = _CRITERIA["frequency_std_factor"]
+    max_frequency_cov: float | None = _CRITERIA["max_frequency_cov"]
+    min_damping_ratio: float = _CRITERIA["min_damping_ratio"]
+    max_damping_ratio: float = _CRITERIA["max_damping_ratio"]
+    damping_std_factor: float | None = _CRITERIA["damping_std_factor"]
+    max_damping_change_with_std: float = _CRITERIA["max_damping_change_with_std"]
+    match_window: float = _CRITERIA["match_window"]
 
     def __post_init__(self):
         check_real("max_frequency_change", self.max_frequency_change, low=0)
@@ -279,14 +346,11 @@ class StabilityCriteria:
             raise ValueError(f"max_damping_ratio must be > min_damping_ratio ({lo}); got {hi}")
 
     def to_dict(self) -> dict:
-        return {f.name: getattr(self, f.name) for f in fields(self)}
+        return {f.name: _exported(getattr(self, f.name)) for f in fields(self)}
 
-    def to_core(self):
-        c = _core.StabilityCriteria()
-        for f in fields(self):
-            value = getattr(self, f.name)
-            setattr(c, f.name, None if value is None else float(value))
-        return c
+    def to_core(self) -> "_core.StabilityCriteria":
+        """The core's criteria (its ``frequency_range``, the band, is set from the identification)."""
+        return _to_core(self, _core.StabilityCriteria, _crossing(StabilityCriteria, _core.StabilityCriteria))
 
 
 @dataclass(frozen=True)
@@ -349,20 +413,20 @@ class ClusteringSettings:
         ``"single"`` chains neighbouring poles, ``"complete"`` is stricter, ``"weighted"`` is WPGMA.
     """
 
-    distance_threshold: float = 0.02
-    min_cluster_size: int | None = None
-    min_cluster_fraction: float = 0.25
-    per_cluster_min_size: bool = False
-    max_frequency_std_per_bandwidth: float | None = 1.0
-    merge_fragments: bool = True
-    drop_doublets: bool = True
-    doublet_window: float = 0.05
-    doublet_min_mac: float = 0.8
-    fragment_std_factor: float = 3.0
-    fragment_min_mac: float = 0.8
-    fragment_max_shared: float = 0.25
-    statuses: tuple = (PoleStatus.STABLE,)
-    linkage: str = "average"
+    distance_threshold: float = _CLUSTERING["distance_threshold"]
+    min_cluster_size: int | None = _CLUSTERING["min_cluster_size"]
+    min_cluster_fraction: float = _CLUSTERING["min_cluster_fraction"]
+    per_cluster_min_size: bool = _CLUSTERING["per_cluster_min_size"]
+    max_frequency_std_per_bandwidth: float | None = _CLUSTERING["max_frequency_std_per_bandwidth"]
+    merge_fragments: bool = _CLUSTERING["merge_fragments"]
+    drop_doublets: bool = _CLUSTERING["drop_doublets"]
+    doublet_window: float = _CLUSTERING["doublet_window"]
+    doublet_min_mac: float = _CLUSTERING["doublet_min_mac"]
+    fragment_std_factor: float = _CLUSTERING["fragment_std_factor"]
+    fragment_min_mac: float = _CLUSTERING["fragment_min_mac"]
+    fragment_max_shared: float = _CLUSTERING["fragment_max_shared"]
+    statuses: tuple = _CLUSTERING["statuses"]
+    linkage: str = _CLUSTERING["linkage"]
 
     def __post_init__(self):
         check_real("distance_threshold", self.distance_threshold, low=0, low_open=True)
@@ -372,7 +436,7 @@ class ClusteringSettings:
         check_real("max_frequency_std_per_bandwidth", self.max_frequency_std_per_bandwidth, low=0, low_open=True,
               allow_none=True)
         for name in ("per_cluster_min_size", "merge_fragments", "drop_doublets"):
-            check_boolean(name, getattr(self, name))
+            object.__setattr__(self, name, check_boolean(name, getattr(self, name)))  # a bool, as to_dict gives
         check_real("doublet_window", self.doublet_window, low=0)
         check_real("doublet_min_mac", self.doublet_min_mac, low=0, high=1)
         check_real("fragment_std_factor", self.fragment_std_factor, low=0)
@@ -391,31 +455,7 @@ class ClusteringSettings:
             raise ValueError(f"linkage must be 'single', 'complete', 'average' or 'weighted'; got {self.linkage!r}")
 
     def to_dict(self) -> dict:
-        return {"distance_threshold": self.distance_threshold, "min_cluster_size": self.min_cluster_size,
-                "min_cluster_fraction": self.min_cluster_fraction,
-                "per_cluster_min_size": bool(self.per_cluster_min_size),
-                "max_frequency_std_per_bandwidth": self.max_frequency_std_per_bandwidth,
-                "merge_fragments": bool(self.merge_fragments), "drop_doublets": bool(self.drop_doublets),
-                "doublet_window": self.doublet_window, "doublet_min_mac": self.doublet_min_mac,
-                "fragment_std_factor": self.fragment_std_factor,
-                "fragment_min_mac": self.fragment_min_mac, "fragment_max_shared": self.fragment_max_shared,
-                "statuses": [s.value for s in self.statuses], "linkage": self.linkage}
+        return {f.name: _exported(getattr(self, f.name)) for f in fields(self)}
 
-    def to_core(self):
-        c = _core.ClusteringOptions()
-        c.distance_threshold = float(self.distance_threshold)
-        c.min_cluster_size = int(self.min_cluster_size or 0)
-        c.min_cluster_fraction = float(self.min_cluster_fraction)
-        c.per_cluster_min_size = bool(self.per_cluster_min_size)
-        c.max_frequency_std_per_bandwidth = (None if self.max_frequency_std_per_bandwidth is None
-                                             else float(self.max_frequency_std_per_bandwidth))
-        c.merge_fragments = bool(self.merge_fragments)
-        c.drop_doublets = bool(self.drop_doublets)
-        c.doublet_window = float(self.doublet_window)
-        c.doublet_min_mac = float(self.doublet_min_mac)
-        c.fragment_std_factor = float(self.fragment_std_factor)
-        c.fragment_min_mac = float(self.fragment_min_mac)
-        c.fragment_max_shared = float(self.fragment_max_shared)
-        c.statuses = [CORE_OF_STATUS[s] for s in self.statuses]
-        c.linkage = getattr(_core.Linkage, self.linkage)
-        return c
+    def to_core(self) -> "_core.ClusteringOptions":
+        return _to_core(self, _core.ClusteringOptions, _crossing(ClusteringSettings, _core.ClusteringOptions))

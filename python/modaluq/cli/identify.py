@@ -21,7 +21,7 @@ from ..checks import require
 from ..plot import plot_stabilization_diagram
 from ..version import __version__
 from .common import CliError, check_image_paths, check_output_paths, integer_option, option_error, real_option
-from .options import add_analysis_options, analysis_settings
+from .options import add_analysis_options, analysis_settings, stated_options
 
 __all__ = ["parse_orders", "parse_read_options", "register", "run"]
 
@@ -189,8 +189,7 @@ def run(args) -> int:
             analysis.selected.plot().savefig(args.plot_shapes, dpi=args.dpi)
             written.append(args.plot_shapes)
         if args.out:
-            stamp = analysis.provenance(
-                cli_arguments={k: v for k, v in vars(args).items() if k not in ("func", "command")})
+            stamp = analysis.provenance(cli_arguments=stated_options(args, criteria, clustering))
             for p in args.out:
                 step(f"writing {Path(p).name}")
                 try:

@@ -23,6 +23,10 @@ __all__ = ["register", "run"]
 #: Failures printed on stderr one per line; beyond, their count (the table has them all).
 SHOWN_FAILURES = 20
 
+#: Tracking options (None when not given) -> the TrackingSettings field they set.
+TRACKING_OPTIONS = {"reference_records": "reference_records", "false_alarm_rate": "false_alarm_rate",
+                    "smoothing": "smoothing", "tracking_min_mac": "min_mac"}
+
 
 def run(args) -> int:
     """Execute ``modaluq monitor`` for parsed ``args``; return the exit status."""
@@ -31,11 +35,13 @@ def run(args) -> int:
     try:
         if args.orders is not None:
             settings = settings.replace(orders=parse_orders(args.orders))
-        tracking = TrackingSettings(
-            reference_records=args.reference_records,
-            reference_span=tuple(args.reference_span) if args.reference_span else None,
-            false_alarm_rate=args.false_alarm_rate, smoothing=args.smoothing, min_mac=args.tracking_min_mac,
-            inflate_to_reference=args.inflate_to_reference)
+        given = {field: getattr(args, option) for option, field in TRACKING_OPTIONS.items()
+                 if getattr(args, option) is not None}  # the rest: TrackingSettings' defaults
+        if args.reference_span:
+            given["reference_span"] = tuple(args.reference_span)
+        if args.inflate_to_reference:
+            given["inflate_to_reference"] = True
+        tracking = TrackingSettings(**given)
     except (TypeError, ValueError) as exc:
         raise option_error(exc, options) from None
     check_image_paths((("--plot", args.plot), ("--plot-control-chart", args.plot_control_chart)))
@@ -118,20 +124,22 @@ def register(subparsers) -> argparse.ArgumentParser:
                         "part files STEM.parts/")
     add_analysis_options(p)
     g = p.add_argument_group("tracking and change test")
-    g.add_argument("--reference-records", type=integer_option(3), default=20, metavar="K",
-                   help="the first K identified records are the reference period (default 20)")
+    t = TrackingSettings()  # the library's defaults, shown in the help
+    g.add_argument("--reference-records", type=integer_option(3), default=None, metavar="K",
+                   help=f"the first K identified records are the reference period (default {t.reference_records})")
     g.add_argument("--reference-span", nargs=2, metavar=("START", "END"), default=None,
                    help="the records between these times (ISO 8601) are the reference period instead")
     g.add_argument("--covariates", metavar="CSV", default=None,
                    help="table with a 'record' column (file names), optionally 'time', and numeric columns "
                         "(temperature ...) the frequencies and damping ratios are regressed on")
-    g.add_argument("--false-alarm-rate", type=real_option(0, 0.5), default=0.01, metavar="P",
-                   help="probability of an alarm at a record and mode when nothing changed (default 0.01)")
-    g.add_argument("--smoothing", type=real_option(0, 1), default=0.3, metavar="LAMBDA",
-                   help="EWMA weight of the newest record in the control statistic (default 0.3; 1: each record "
-                        "tested on its own)")
-    g.add_argument("--tracking-min-mac", type=real_option(0, 1, low_open=False), default=0.8, metavar="MAC",
-                   help="smallest MAC between a record's mode and a reference mode (default 0.8)")
+    g.add_argument("--false-alarm-rate", type=real_option(0, 0.5), default=None, metavar="P",
+                   help=f"probability of an alarm at a record and mode when nothing changed "
+                        f"(default {t.false_alarm_rate:g})")
+    g.add_argument("--smoothing", type=real_option(0, 1), default=None, metavar="LAMBDA",
+                   help=f"EWMA weight of the newest record in the control statistic (default {t.smoothing:g}; "
+                        "1: each record tested on its own)")
+    g.add_argument("--tracking-min-mac", type=real_option(0, 1, low_open=False), default=None, metavar="MAC",
+                   help=f"smallest MAC between a record's mode and a reference mode (default {t.min_mac:g})")
     g.add_argument("--check-harmonics", action="store_true",
                    help="flag modes that may be harmonics of the excitation (costs about one more identification)")
     g.add_argument("--inflate-to-reference", action="store_true",

@@ -1,5 +1,10 @@
 """The options ``modaluq identify`` and ``modaluq monitor`` share: how a record is read, preprocessed,
-identified and its modes selected, and their translation into the library's settings objects."""
+identified and its modes selected, and their translation into the library's settings objects.
+
+An option the user does not give is None and left out of the settings objects, so the library's
+default applies (the core's, see :mod:`modaluq.settings`); ``--help`` shows that default, read
+from the objects. An option's parameter name is the name of the field it sets.
+"""
 
 from __future__ import annotations
 
@@ -8,7 +13,23 @@ import argparse
 from ..settings import ClusteringSettings, Settings, StabilityCriteria
 from .common import integer_option, option_error, real_option
 
-__all__ = ["add_analysis_options", "analysis_settings"]
+__all__ = ["CLUSTERING_OPTIONS", "CRITERIA_OPTIONS", "OFF_AT_ZERO", "SETTINGS_OPTIONS", "add_analysis_options",
+           "analysis_settings", "stated_options"]
+
+#: Options that set the field of the same name, by the object that holds it (``--no-uncertainty``
+#: sets ``Settings.uncertainty``).
+SETTINGS_OPTIONS = ("frequency_range", "start", "stop", "decimate", "detrend", "highpass", "block_rows",
+                    "past_block_rows", "n_blocks")
+CRITERIA_OPTIONS = ("max_frequency_change", "max_damping_change", "min_mac", "damping_std_factor", "match_window",
+                    "frequency_std_factor", "max_frequency_cov", "max_damping_ratio")
+CLUSTERING_OPTIONS = ("distance_threshold", "min_cluster_size")
+#: Options whose 0 switches their test off (the field's None).
+OFF_AT_ZERO = ("frequency_std_factor", "max_frequency_cov", "damping_std_factor")
+
+
+def _shown(value) -> str:
+    """A default as ``--help`` shows it."""
+    return "off" if value is None else f"{value:g}"
 
 
 def add_analysis_options(p: argparse.ArgumentParser) -> None:
@@ -54,48 +75,64 @@ def add_analysis_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--no-uncertainty", action="store_true",
                    help="skip the uncertainty (the sigma criteria are then not applied)")
     g = p.add_argument_group("stabilization and mode selection")
-    g.add_argument("--max-frequency-change", type=float, default=0.01, metavar="FRAC",
-                   help="largest relative frequency change between orders (default 0.01)")
-    g.add_argument("--max-damping-change", type=float, default=0.10, metavar="FRAC",
+    c, k = StabilityCriteria(), ClusteringSettings()  # the library's defaults, shown in the help
+    g.add_argument("--max-frequency-change", type=float, default=None, metavar="FRAC",
+                   help=f"largest relative frequency change between orders (default {_shown(c.max_frequency_change)})")
+    g.add_argument("--max-damping-change", type=float, default=None, metavar="FRAC",
                    help="largest relative damping change between orders, with --damping-std-factor 0 or "
-                        "without uncertainty (default 0.10)")
-    g.add_argument("--min-mac", type=float, default=0.98, help="smallest MAC between orders (default 0.98)")
-    g.add_argument("--damping-std-factor", type=float, default=2.0, metavar="K",
-                   help="judge a damping change between orders against K x its combined std (default 2; "
-                        "0: the relative test --max-damping-change)")
-    g.add_argument("--match-window", type=float, default=0.05, metavar="FRAC",
+                        f"without uncertainty (default {_shown(c.max_damping_change)})")
+    g.add_argument("--min-mac", type=float, default=None,
+                   help=f"smallest MAC between orders (default {_shown(c.min_mac)})")
+    g.add_argument("--damping-std-factor", type=float, default=None, metavar="K",
+                   help="judge a damping change between orders against K x its combined std (default "
+                        f"{_shown(c.damping_std_factor)}; 0: the relative test --max-damping-change)")
+    g.add_argument("--match-window", type=float, default=None, metavar="FRAC",
                    help="a pole is compared only with poles of the previous order within this relative "
-                        "frequency distance (default 0.05)")
-    g.add_argument("--frequency-std-factor", type=float, default=2.0, metavar="K",
-                   help="|df| <= K sqrt(std1^2 + std2^2) between orders (default 2; 0 switches it off)")
-    g.add_argument("--max-frequency-cov", type=float, default=0.05, metavar="FRAC",
-                   help="reject poles with std_f / f above this (default 0.05; 0 switches it off)")
-    g.add_argument("--max-damping-ratio", type=float, default=0.20, metavar="FRAC",
-                   help="reject poles with a damping ratio above this (default 0.20)")
-    g.add_argument("--distance-threshold", type=float, default=0.02,
-                   help="clustering cut on |df|/f + (1 - MAC) (default 0.02)")
+                        f"frequency distance (default {_shown(c.match_window)})")
+    g.add_argument("--frequency-std-factor", type=float, default=None, metavar="K",
+                   help="|df| <= K sqrt(std1^2 + std2^2) between orders "
+                        f"(default {_shown(c.frequency_std_factor)}; 0 switches it off)")
+    g.add_argument("--max-frequency-cov", type=float, default=None, metavar="FRAC",
+                   help=f"reject poles with std_f / f above this (default {_shown(c.max_frequency_cov)}; "
+                        "0 switches it off)")
+    g.add_argument("--max-damping-ratio", type=float, default=None, metavar="FRAC",
+                   help=f"reject poles with a damping ratio above this (default {_shown(c.max_damping_ratio)})")
+    g.add_argument("--distance-threshold", type=float, default=None,
+                   help=f"clustering cut on |df|/f + (1 - MAC) (default {_shown(k.distance_threshold)})")
+    automatic = f"{_shown(k.min_cluster_fraction)} of the orders, at least 3"
     g.add_argument("--min-cluster-size", type=integer_option(1), default=None, metavar="N",
-                   help="poles a mode needs (default: a quarter of the orders, at least 3)")
+                   help=f"poles a mode needs (default: {k.min_cluster_size or automatic})")
+
+
+def _given(args, names) -> dict:
+    """The options of ``names`` the user gave, as field values (0 is None for OFF_AT_ZERO)."""
+    out = {}
+    for name in names:
+        value = getattr(args, name)
+        if value is not None:
+            out[name] = None if name in OFF_AT_ZERO and value == 0 else value
+    return out
 
 
 def analysis_settings(args) -> tuple:
     """The options as the library's settings objects, an error naming the option."""
     options = set(vars(args))  # every option, by its parameter name
     try:
-        settings = Settings(block_rows=args.block_rows, past_block_rows=args.past_block_rows, n_blocks=args.n_blocks,
-                            uncertainty=not args.no_uncertainty, frequency_range=args.frequency_range,
-                            start=args.start, stop=args.stop, decimate=args.decimate, detrend=args.detrend,
-                            highpass=args.highpass)
-        criteria = StabilityCriteria(
-            max_frequency_change=args.max_frequency_change, max_damping_change=args.max_damping_change,
-            min_mac=args.min_mac,
-            frequency_std_factor=None if args.frequency_std_factor == 0 else args.frequency_std_factor,
-            max_frequency_cov=None if args.max_frequency_cov == 0 else args.max_frequency_cov,
-            max_damping_ratio=args.max_damping_ratio,
-            damping_std_factor=None if args.damping_std_factor == 0 else args.damping_std_factor,
-            match_window=args.match_window)
-        clustering = ClusteringSettings(distance_threshold=args.distance_threshold,
-                                        min_cluster_size=args.min_cluster_size)
+        settings = Settings(**_given(args, SETTINGS_OPTIONS), **({"uncertainty": False} if args.no_uncertainty else {}))
+        criteria = StabilityCriteria(**_given(args, CRITERIA_OPTIONS))
+        clustering = ClusteringSettings(**_given(args, CLUSTERING_OPTIONS))
     except (TypeError, ValueError) as exc:  # "min_mac must be ..." -> "--min-mac must be ..."
         raise option_error(exc, options) from None
     return settings, criteria, clustering
+
+
+def stated_options(args, criteria, clustering) -> dict:
+    """``args`` as a dict for a provenance stamp, each criterion or clustering option not given
+    replaced by the value used (a test that is off by 0): the run can be repeated from it."""
+    out = {k: v for k, v in vars(args).items() if k not in ("func", "command")}
+    for obj, names in ((criteria, CRITERIA_OPTIONS), (clustering, CLUSTERING_OPTIONS)):
+        for name in names:
+            if out.get(name) is None:
+                value = getattr(obj, name)
+                out[name] = 0.0 if value is None and name in OFF_AT_ZERO else value
+    return out

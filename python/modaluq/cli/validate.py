@@ -11,6 +11,7 @@ other files carry the order in their name (``results_n24.csv``, ...).
 
 from __future__ import annotations
 
+import inspect
 import sys
 from pathlib import Path
 
@@ -19,6 +20,16 @@ from ..validation import monte_carlo
 from .common import check_output_paths, integer_option, real_option
 
 __all__ = ["register", "run"]
+
+#: What ``monte_carlo`` does for an option not given (it is not passed), shown in ``--help``.
+DEFAULTS = {name: p.default for name, p in inspect.signature(monte_carlo).parameters.items()}
+
+#: Options (None when not given) -> the keyword of ``monte_carlo`` they set.
+KEYWORDS = {"records": "n_records", "samples": "n_samples", "order": "order", "block_rows": "block_rows",
+            "past_block_rows": "past_block_rows", "n_blocks": "n_blocks", "seed": "seed", "processes": "processes",
+            "tolerance": "match_tolerance", "unknown_input_std": "unknown_input_std",
+            "damping_ratio": "damping_ratio", "n_dof": "n_dof", "input_dofs": "input_dofs",
+            "output_dofs": "output_dofs", "noise_coupling_limit": "noise_coupling_limit"}
 
 #: Files written into ``--out``.
 OUTPUT_FILES = ("report.md", "results.csv", "summary.csv", "results.npz", "histograms_std.png",
@@ -36,7 +47,10 @@ def _file_names(orders) -> list:
 
 
 def run(args) -> int:
-    orders = sorted(set(args.order))
+    given = {keyword: getattr(args, option) for option, keyword in KEYWORDS.items()
+             if getattr(args, option) is not None}
+    order = given.get("order", DEFAULTS["order"])
+    orders = sorted(set([order] if isinstance(order, int) else order))
     names = _file_names(orders)
     out = None
     if args.out is not None:
@@ -45,13 +59,9 @@ def run(args) -> int:
             raise ValueError(f"--out must be a directory; {out} is a file")
         # before the run, not after it
         check_output_paths([("--out", out / name) for name in names], overwrite=args.overwrite)
-    results = monte_carlo(args.records, n_samples=args.samples, order=orders, block_rows=args.block_rows,
-                          past_block_rows=args.past_block_rows, n_blocks=args.n_blocks, seed=args.seed,
-                          processes=args.processes, progress=not args.no_progress,
-                          match_tolerance=args.tolerance, unknown_input_std=args.unknown_input_std,
-                          damping_ratio=args.damping_ratio, n_dof=args.n_dof, input_dofs=args.input_dofs,
-                          output_dofs=args.output_dofs, freeze_noise=not args.no_freeze_noise,
-                          noise_coupling_limit=args.noise_coupling_limit)
+    if args.no_freeze_noise:
+        given["freeze_noise"] = False
+    results = monte_carlo(**{**given, "order": orders}, progress=not args.no_progress)
     text = "\n".join(r.report() for r in results)
     if out is not None:
         out.mkdir(parents=True, exist_ok=True)
@@ -84,36 +94,42 @@ def register(subparsers) -> None:
                     "input/output, and compare the mean analytic standard deviation of every frequency and "
                     "damping ratio with the sample standard deviation over the records (the paper's Tables 1 "
                     "and 2, printed beside ours).  The report goes to stdout, the progress bar to stderr.")
-    v.add_argument("--records", type=integer_option(1), default=200,
-                   help="number of records (default 200; the paper used 10000)")
-    v.add_argument("--samples", type=integer_option(1), default=10_000,
-                   help="samples per record (default 10000, as the paper)")
-    v.add_argument("--order", type=integer_option(1), nargs="+", default=[12], metavar="N",
-                   help="model order(s), e.g. --order 12 24 36: every order from the same records (default 12)")
-    v.add_argument("--block-rows", type=integer_option(2), default=15, help="future block rows p (default 15)")
+    d = DEFAULTS
+    v.add_argument("--records", type=integer_option(1), default=None,
+                   help=f"number of records (default {d['n_records']}; the paper used 10000)")
+    v.add_argument("--samples", type=integer_option(1), default=None,
+                   help=f"samples per record (default {d['n_samples']}, as the paper)")
+    v.add_argument("--order", type=integer_option(1), nargs="+", default=None, metavar="N",
+                   help="model order(s), e.g. --order 12 24 36: every order from the same records "
+                        f"(default {d['order']})")
+    v.add_argument("--block-rows", type=integer_option(2), default=None,
+                   help=f"future block rows p (default {d['block_rows']})")
     v.add_argument("--past-block-rows", type=integer_option(1), default=None, help="past block rows q (default: p)")
-    v.add_argument("--n-blocks", type=integer_option(2), default=50, help="blocks for the uncertainty (default 50)")
-    v.add_argument("--unknown-input-std", type=real_option(0, low_open=False), default=0.1,
+    v.add_argument("--n-blocks", type=integer_option(2), default=None,
+                   help=f"blocks for the uncertainty (default {d['n_blocks']})")
+    v.add_argument("--unknown-input-std", type=real_option(0, low_open=False), default=None,
                    help="std of the unmeasured forces relative to the known input; 0: the known input is the "
-                        "only excitation (default 0.1, the paper's)")
-    v.add_argument("--damping-ratio", type=real_option(0, 1, high_open=True), default=0.02,
-                   help="modal damping ratio of every mode, a fraction (default 0.02)")
-    v.add_argument("--n-dof", type=integer_option(1), default=6,
-                   help="masses of the simulated chain (shear frame) (default 6, the paper's)")
-    v.add_argument("--input-dofs", type=integer_option(0), nargs="+", default=[0], metavar="DOF",
-                   help="0-based DOFs of the known input forces (default 0)")
+                        f"only excitation (default {d['unknown_input_std']:g}, the paper's)")
+    v.add_argument("--damping-ratio", type=real_option(0, 1, high_open=True), default=None,
+                   help=f"modal damping ratio of every mode, a fraction (default {d['damping_ratio']:g})")
+    v.add_argument("--n-dof", type=integer_option(1), default=None,
+                   help=f"masses of the simulated chain (shear frame) (default {d['n_dof']}, the paper's)")
+    v.add_argument("--input-dofs", type=integer_option(0), nargs="+", default=None, metavar="DOF",
+                   help=f"0-based DOFs of the known input forces (default {' '.join(map(str, d['input_dofs']))})")
     v.add_argument("--output-dofs", type=integer_option(0), nargs="+", default=None, metavar="DOF",
                    help="0-based DOFs measured (default: 0 1 4 for 6 DOFs, else spread evenly)")
-    v.add_argument("--noise-coupling-limit", type=real_option(1, low_open=False), default=20.0,
-                   help="flag poles whose sigma the noise directions inflate more than this (default 20)")
+    v.add_argument("--noise-coupling-limit", type=real_option(1, low_open=False), default=None,
+                   help="flag poles whose sigma the noise directions inflate more than this "
+                        f"(default {d['noise_coupling_limit']:g})")
     v.add_argument("--no-freeze-noise", action="store_true",
                    help="plain first-order propagation, noise singular vectors free (for comparison)")
-    v.add_argument("--seed", type=integer_option(0), default=0,
-                   help="seed of the run; record k uses SeedSequence(seed, spawn_key=(k,)) (default 0)")
+    v.add_argument("--seed", type=integer_option(0), default=None,
+                   help=f"seed of the run; record k uses SeedSequence(seed, spawn_key=(k,)) (default {d['seed']})")
     v.add_argument("--processes", type=integer_option(1, MAX_THREADS), default=None,
                    help="worker processes (default: the CPUs available; 1 runs in this process)")
-    v.add_argument("--tolerance", type=real_option(0, 1, high_open=True), default=0.05,
-                   help="relative frequency window that matches an identified mode to a true one (default 0.05)")
+    v.add_argument("--tolerance", type=real_option(0, 1, high_open=True), default=None,
+                   help="relative frequency window that matches an identified mode to a true one "
+                        f"(default {d['match_tolerance']:g})")
     v.add_argument("--out", metavar="DIR", default=None,
                    help="directory for report.md, results.csv, summary.csv, results.npz and the histogram PNGs")
     v.add_argument("--overwrite", action="store_true", help="replace the files of an earlier run in --out")

@@ -597,8 +597,8 @@ def monte_carlo(n_records: int = 200, *, n_samples: int = 10_000, order=12, bloc
                 processes: int | None = None, progress: bool = True, match_tolerance: float = 0.05,
                 n_bootstrap: int = _DEFAULT_BOOTSTRAP, chunk_size: int | None = None,
                 mp_context: str = "spawn", unknown_input_std: float = 0.1, damping_ratio: float = 0.02,
-                n_dof: int = 6, input_dofs=(0,), output_dofs=None, freeze_noise: bool = True,
-                noise_coupling_limit: float = 20.0):
+                n_dof: int = 6, input_dofs=(0,), output_dofs=None, freeze_noise: bool = Settings.freeze_noise,
+                noise_coupling_limit: float = Settings.noise_coupling_limit):
     """Monte Carlo study of the analytic standard deviations (the paper's §5.1).
 
     Simulates ``n_records`` independent records of the paper's 6-DOF chain
