@@ -1,5 +1,5 @@
 """Part files: every finished record kept on disk as soon as it arrives, so that a run restarts
-where it stopped (docs/monitoring.md §2).
+where it stopped (docs/monitoring.md §1).
 
 One JSON file per record in ``<store stem>.parts/``, named by a hash of the record's key, written
 atomically by the driver process (a killed run leaves whole parts only); ``settings.json``

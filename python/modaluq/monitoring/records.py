@@ -80,7 +80,6 @@ class RecordTask:
     covariates: dict = field(default_factory=dict)
 
 
-
 def record_tasks(records, covariates=None) -> list:
     """Records (paths, folders, patterns, record objects) → tasks with names, times and covariates."""
     if isinstance(records, (str, os.PathLike)) or _is_record_object(records):

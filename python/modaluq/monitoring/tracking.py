@@ -30,8 +30,8 @@ import scipy.optimize
 from ..checks import check_boolean, check_integer, check_real
 from ..stabilization import modal_assurance_criterion
 
-__all__ = ["RecordModes", "ReferenceModes", "Tracks", "TrackingSettings", "assign", "assignment_cost",
-           "reference_modes", "reference_period", "track"]
+__all__ = ["RecordModes", "ReferenceModes", "Tracks", "TrackingSettings", "assign", "reference_modes",
+           "reference_period", "track"]
 
 #: Variance floor of a shape component (the normalised component has σ = 0).
 SHAPE_VARIANCE_FLOOR = 1e-6
@@ -105,6 +105,7 @@ class TrackingSettings:
     def to_dict(self) -> dict:
         return {k: (list(map(str, v)) if k == "reference_span" and v is not None else v)
                 for k, v in self.__dict__.items()}
+
 
 @dataclass(frozen=True)
 class RecordModes:

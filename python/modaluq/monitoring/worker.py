@@ -3,7 +3,7 @@
 
 :func:`process_record` never raises: a record's failure is kept with the stage it failed at
 (``load``, ``preprocess``, ``identify``, ``select``) and its error, and the batch goes on. What it
-returns is plain values (docs/monitoring.md §2), sent back to the driver, which keeps it as the
+returns is plain values (docs/monitoring.md §1), sent back to the driver, which keeps it as the
 record's part (:mod:`modaluq.monitoring.parts`).
 """
 
