@@ -14,10 +14,10 @@ from matplotlib.patches import FancyArrowPatch, FancyBboxPatch
 # (label, modules) from the top layer down: each imports only the layers below it
 PYTHON = [
     ("command line", "cli/  (identify · monitor · demo · validate)"),
-    ("monitoring", "monitoring  (monitor: executors, part files, store)"),
+    ("monitoring wing", "monitoring/  (run · records · worker · executors · parts · tracking · change · store · plot)"),
     ("plot and export", "plot · export"),
     ("analysis", "analysis · horizons · validation/"),
-    ("selection, tracking", "selection · tracking"),
+    ("selection", "selection"),
     ("stabilization", "stabilization"),
     ("identification", "identification · streaming"),
     ("result types", "results"),
@@ -25,7 +25,7 @@ PYTHON = [
     ("argument checks", "checks"),
     ("C++ core", "_core (pybind11: translation only) · _blas · version"),
 ]
-SIDE = [("side leaves", "io/  (file loaders)\nsimulate\nmonitoring_simulator"), ]
+SIDE = [("side leaves", "io/  (file loaders)\nsimulate\nmonitoring/simulator"), ]
 CPP = ["covariance.hpp\nlag sums, blocks", "subspace.hpp\nH (OO or IO)", "realization.hpp\nSVD → Γ, A, C",
        "modal.hpp\nf, ξ, shapes", "uncertainty.hpp\nΣ → σ per order", "stabilization.hpp\njudge poles",
        "selection.hpp\ncluster → modes"]

@@ -10,9 +10,7 @@ from pathlib import Path
 import numpy as np
 
 import modaluq
-from modaluq.monitoring import monitor
-from modaluq.monitoring_simulator import simulate_monitoring
-from modaluq.tracking import TrackingSettings
+from modaluq.monitoring import TrackingSettings, monitor, simulate_monitoring
 
 IMG = Path(__file__).resolve().parent / "img"
 

@@ -12,24 +12,24 @@ mode shape at every model order, computed from one dataset.
 The modules form layers, each importing only those below it (docs/architecture.md):
 ``checks`` → ``settings``, ``preprocess``, ``auto_settings``, ``spectrum``, ``harmonics`` →
 ``results`` → ``identification``, ``streaming`` → ``stabilization`` → ``selection`` →
-``horizons``, ``analysis`` → ``plot``, ``export`` → ``monitoring`` (many records: ``monitor``) →
-``cli``; ``tracking`` sits beside ``selection``; ``io``, ``simulate`` and ``monitoring_simulator``
-are side leaves, ``validation`` sits on identification and the simulator.
+``horizons``, ``analysis`` → ``plot``, ``export`` → the ``monitoring/`` wing (many records:
+``monitor``) → ``cli``; ``io``, ``simulate`` and ``monitoring.simulator`` are side leaves,
+``validation`` sits on identification and the simulator.
+
+The wing's names here (``monitor``, ``Monitoring``, ``load_tracks``, ``simulate_monitoring``,
+``TrackingSettings``) are resolved on first use: ``import modaluq`` does not import the wing.
 """
 
 from ._core import NumericalError
 from .analysis import Analysis
 from .horizons import HorizonCheck, check_horizons
 from .identification import identify
-from .monitoring import Monitoring, load_tracks, monitor
-from .monitoring_simulator import simulate_monitoring
 from .results import ModalUQWarning, Modes, Result
 from .selection import SelectedModes, select_modes
 from .settings import ClusteringSettings, PoleStatus, Settings, StabilityCriteria
 from .simulate import Simulation, simulate
 from .stabilization import Diagram, modal_assurance_criterion, stabilization_diagram
 from .streaming import CovarianceAccumulator
-from .tracking import TrackingSettings
 from .version import __version__
 
 __all__ = [
@@ -60,3 +60,21 @@ __all__ = [
     "stabilization_diagram",
     "__version__",
 ]
+
+#: The monitoring wing's names: imported on first use (PEP 562), so that ``import modaluq`` and
+#: every command but ``modaluq monitor`` do not load the wing.
+_MONITORING_NAMES = ("Monitoring", "TrackingSettings", "load_tracks", "monitor", "simulate_monitoring")
+
+
+def __getattr__(name):
+    if name in _MONITORING_NAMES:
+        from . import monitoring
+
+        value = getattr(monitoring, name)
+        globals()[name] = value  # found directly from now on
+        return value
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def __dir__():
+    return sorted(set(globals()) | set(_MONITORING_NAMES))

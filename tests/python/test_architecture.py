@@ -23,14 +23,14 @@ LAYERS = {
     # settings and the signal helpers they are applied with; the side leaves (files, simulator)
     "modaluq.settings": 2, "modaluq.preprocess": 2, "modaluq.auto_settings": 2, "modaluq.spectrum": 2,
     "modaluq.harmonics": 2, "modaluq.provenance": 2, "modaluq.simulate": 2, "modaluq.io.*": 2,
-    "modaluq.monitoring_simulator": 2,
+    "modaluq.monitoring.simulator": 2,  # the monitoring wing's campaign simulator: a side leaf
     "modaluq.results": 3,
     "modaluq.identification": 4, "modaluq.streaming": 4,
     "modaluq.stabilization": 5,
-    "modaluq.selection": 6, "modaluq.tracking": 6,
+    "modaluq.selection": 6,
     "modaluq.horizons": 7, "modaluq.analysis": 7, "modaluq.validation.*": 7,
     "modaluq.plot": 8, "modaluq.export": 8,
-    "modaluq.monitoring": 9,  # many records: analysis, tracking, plots and stores
+    "modaluq.monitoring.*": 9,  # the wing, many records: its modules in WING order
     "modaluq.cli.*": 10,
     "modaluq": 11,  # the package's namespace: re-exports the public API
 }
@@ -41,7 +41,14 @@ CONVENIENCE_CLASSES = {"Result", "Diagram", "SelectedModes", "MonteCarloResult"}
 
 #: Side leaves: they import nothing of the package but these (and their own subpackage).
 SIDE_LEAVES = {"modaluq.io": {"modaluq.checks"}, "modaluq.simulate": {"modaluq.checks"},
-               "modaluq.monitoring_simulator": {"modaluq.checks", "modaluq.simulate"}}
+               "modaluq.monitoring.simulator": {"modaluq.checks", "modaluq.simulate"}}
+
+#: The monitoring wing's modules (docs/architecture.md), each importing only those before it;
+#: its ``__init__`` (``modaluq.monitoring``) imports them all.
+WING = ["modaluq.monitoring.simulator", "modaluq.monitoring.tracking", "modaluq.monitoring.change",
+        "modaluq.monitoring.records", "modaluq.monitoring.parts", "modaluq.monitoring.executors",
+        "modaluq.monitoring.worker", "modaluq.monitoring.store", "modaluq.monitoring.plot",
+        "modaluq.monitoring.run"]
 
 
 def module_name(path: pathlib.Path) -> str:
@@ -176,9 +183,9 @@ def test_no_private_name_crosses_a_module(graph):
         private = [n for n in imp.names if n.startswith("_") and not n.startswith("__")]
         if private and imp.target != imp.source:
             bad.append(imp)
-        # a private module (_common, _blas) is used only inside its own package
+        # a private module (_common, _blas) is used only inside its own package (and its subpackages)
         hidden = [p for p in imp.target.split(".")[1:] if p.startswith("_") and p != "__init__"]
-        if hidden and not (imp.target.startswith(imp.source.rpartition(".")[0] + ".") or
+        if hidden and not (imp.source.startswith(imp.target.rpartition(".")[0] + ".") or
                            imp.target.rpartition(".")[0] == imp.source) and imp.target != "modaluq._core":
             bad.append(imp)
     assert not bad, f"private names or modules used from another module: {bad}"
@@ -194,6 +201,19 @@ def test_side_leaves_stand_alone(graph):
             if inside and not own and imp.target not in allowed and imp.target != "modaluq._core":
                 bad.append(imp)
     assert not bad, f"a side leaf imports the package: {bad}"
+
+
+def test_the_wing_imports_its_modules_in_order_and_nothing_imports_the_wing_at_import_time(graph):
+    mods, imps = graph
+    assert sorted(WING) == sorted(m for m in mods if m.startswith("modaluq.monitoring.")), \
+        "a module of the wing is missing from WING (and docs/architecture.md)"
+    backwards = [imp for imp in imps if imp.source in WING and imp.target in WING
+                 and WING.index(imp.target) >= WING.index(imp.source)]
+    assert not backwards, f"the wing's modules import only those before them in WING: {backwards}"
+    # the wing is loaded when used: the package face and the command line import it inside functions
+    eager = [imp for imp in imps if not imp.source.startswith("modaluq.monitoring") and imp.function is None
+             and (imp.target == "modaluq.monitoring" or imp.target.startswith("modaluq.monitoring."))]
+    assert not eager, f"imports of the monitoring wing at import time: {eager}"
 
 
 def test_the_rule_itself_catches_an_upward_import_and_a_private_name(tmp_path):
@@ -236,7 +256,7 @@ def test_documents_cited_in_the_code_exist_with_the_sections_cited():
     root = PACKAGE.parents[1]
     cited = set()
     for path in [*root.glob("python/**/*.py"), *root.glob("cpp/include/**/*.hpp"), *root.glob("bindings/*.cpp"),
-                 *root.glob("tests/cpp/*.cpp"), *root.glob("tests/python/*.py")]:
+                 *root.glob("tests/cpp/*.cpp"), *root.glob("tests/python/**/*.py")]:
         for m in re.finditer(r"docs/([A-Za-z0-9_-]+\.md)(?:\s+§\s*([0-9]+(?:\.[0-9]+)*))?", path.read_text("utf-8")):
             cited.add((m.group(1), m.group(2) or "", path.relative_to(root).as_posix()))
     assert cited, "the search finds nothing: the test would pass vacuously"

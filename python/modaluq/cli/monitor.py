@@ -2,7 +2,8 @@
 
 Option translation over :func:`modaluq.monitoring.monitor`; the preprocessing, identification and
 selection options are those of ``modaluq identify``. Failures are listed on stderr (and in
-``<stem>.failures.csv``); the exit status is 2 when no record could be identified.
+``<stem>.failures.csv``); the exit status is 2 when no record could be identified. The monitoring
+wing is imported when the command runs, not when the command line is built.
 """
 
 from __future__ import annotations
@@ -11,8 +12,6 @@ import argparse
 import sys
 import warnings
 
-from ..monitoring import monitor
-from ..tracking import TrackingSettings
 from ..version import __version__
 from .common import CliError, check_image_paths, integer_option, option_error, real_option
 from .identify import parse_orders, parse_read_options
@@ -30,6 +29,8 @@ TRACKING_OPTIONS = {"reference_records": "reference_records", "false_alarm_rate"
 
 def run(args) -> int:
     """Execute ``modaluq monitor`` for parsed ``args``; return the exit status."""
+    from ..monitoring import TrackingSettings, monitor  # the wing: only for this command
+
     options = set(vars(args))
     settings, criteria, clustering = analysis_settings(args)
     try:

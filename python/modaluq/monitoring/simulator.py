@@ -7,7 +7,7 @@ chain whose springs are all scaled by ``1 + temperature_coefficient (T - T_ref)`
 The records are made lazily (:meth:`SimulatedRecord.load`), so a campaign of thousands of records
 costs nothing until a worker loads one, and a record travels to a worker as a few numbers.
 
->>> from modaluq.monitoring_simulator import simulate_monitoring
+>>> from modaluq.monitoring import simulate_monitoring
 >>> campaign = simulate_monitoring(48, n_samples=2000, seed=1)
 >>> campaign.records[0].name, str(campaign.records[1].time)
 ('record-0000', '2026-01-01T01:00:00')
@@ -16,8 +16,8 @@ costs nothing until a worker loads one, and a record travels to a worker as a fe
 >>> campaign.records[0].load().y.shape
 (2000, 3)
 
-This module is a side leaf of the package: it imports only :mod:`modaluq.checks` and
-:mod:`modaluq.simulate`.
+This module is a side leaf of the package (in the monitoring wing): it imports only
+:mod:`modaluq.checks` and :mod:`modaluq.simulate`.
 """
 
 from __future__ import annotations
@@ -28,8 +28,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .checks import check_integer, check_real, check_sampling_frequency
-from .simulate import Simulation, chain_system, default_output_dofs, modal_parameters, simulate
+from ..checks import check_integer, check_real, check_sampling_frequency
+from ..simulate import Simulation, chain_system, default_output_dofs, modal_parameters, simulate
 
 __all__ = ["MonitoringSimulation", "SimulatedRecord", "simulate_monitoring"]
 

@@ -1,4 +1,4 @@
-"""Monitoring on the simulator (modaluq.monitoring_simulator): false alarms, detection, close modes.
+"""Monitoring on the simulator (modaluq.monitoring.simulator): false alarms, detection, close modes.
 
 The truth is the simulator's: its temperature series, its damage, its modes. The stated rates
 are checked with tolerances derived from the binomial law (docs/monitoring.md §4).
@@ -10,10 +10,8 @@ import scipy.optimize
 import scipy.stats
 
 import modaluq
-from modaluq.monitoring import monitor
-from modaluq.monitoring_simulator import simulate_monitoring
+from modaluq.monitoring import TrackingSettings, monitor, simulate_monitoring
 from modaluq.simulate import chain_system, modal_parameters
-from modaluq.tracking import TrackingSettings
 
 pytest.importorskip("xarray")
 pytestmark = pytest.mark.slow

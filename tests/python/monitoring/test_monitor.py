@@ -1,85 +1,19 @@
-"""modaluq.monitor and ``modaluq monitor``: the batch, its part files, executors and stores."""
+"""modaluq.monitor: the batch, its part files, stores, notes and arguments."""
 
 import concurrent.futures
 import json
 import os
-import signal
 import subprocess
 import sys
-import time
 
 import numpy as np
 import pytest
+from monitoring_support import SETTINGS
 
 import modaluq
-from modaluq.cli import main
-from modaluq.monitoring import load_tracks, monitor, record_files, time_from_name
-from modaluq.monitoring_simulator import simulate_monitoring
-from modaluq.tracking import TrackingSettings
+from modaluq.monitoring import TrackingSettings, load_tracks, monitor, record_files, time_from_name
 
 pytest.importorskip("xarray")
-SETTINGS = modaluq.Settings(orders=tuple(range(2, 25, 2)))
-
-
-@pytest.fixture(scope="module")
-def campaign():
-    return simulate_monitoring(24, n_samples=6000, seed=11)
-
-
-@pytest.fixture(scope="module")
-def serial(campaign):
-    return monitor(campaign.records, settings=SETTINGS, threads=1, progress=False)
-
-
-def assert_same_tracks(a, b, *, other_process=False):
-    """The same tracks. Within one process, bit for bit. Across processes the identification
-    (f, ξ, shapes), the assignment and the alarms are bit for bit the same, and σ and what is
-    computed from it agree to rounding: the BLAS's last bits in the uncertainty propagation
-    depend on the process (measured: 8e-14 relative between the pytest process and a Dask worker)."""
-    import xarray as xr
-
-    if not other_process:
-        xr.testing.assert_identical(a.dataset, b.dataset)
-        assert a.poles.equals(b.poles)
-        return
-    ds_a, ds_b = a.dataset, b.dataset
-    assert set(ds_a.variables) == set(ds_b.variables) and ds_a.attrs == ds_b.attrs
-    exact = {"frequency_hz", "damping_ratio", "mode_shape", "mode_shape_real", "mode_shape_imag", "alarm",
-             "reference_frequency_hz", "reference_damping_ratio", "reference_mode_shape", "n_poles"}
-    for name in ds_a.variables:
-        x, y = ds_a[name].values, ds_b[name].values
-        if name in exact or not np.issubdtype(x.dtype, np.floating):
-            np.testing.assert_array_equal(x, y, err_msg=name)
-        else:
-            np.testing.assert_allclose(x, y, rtol=1e-10, atol=0, equal_nan=True, err_msg=name)
-    for column in a.poles.columns:
-        if a.poles[column].dtype.kind == "f" and column.endswith("_std"):
-            np.testing.assert_allclose(a.poles[column], b.poles[column], rtol=1e-10, err_msg=column)
-        else:
-            assert a.poles[column].equals(b.poles[column]), column
-
-
-# ------------------------------------------------------------------------------ simulator
-
-
-def test_simulator_temperature_moves_the_frequencies_and_damage_moves_its_element(campaign):
-    assert len(campaign) == 24 and campaign.frequency_hz.shape == (24, 6)
-    # stiffness (1 + c (T - T0)) with c < 0: f ∝ sqrt(stiffness), so the colder the stiffer
-    expected = campaign.frequency_hz[0] * np.sqrt((1 - 0.004 * (campaign.temperature[5] - 10))
-                                                  / (1 - 0.004 * (campaign.temperature[0] - 10)))
-    np.testing.assert_allclose(campaign.frequency_hz[5], expected, rtol=1e-10)
-    damaged = simulate_monitoring(6, n_samples=1000, seed=11, temperature=np.full(6, 10.0), damage_element=0,
-                                  damage_record=3, damage_fraction=0.1)
-    assert damaged.damaged.tolist() == [False] * 3 + [True] * 3
-    assert np.all(damaged.frequency_hz[3] < damaged.frequency_hz[2]) and np.all(damaged.frequency_hz[4] == damaged.frequency_hz[3])
-    assert damaged.records[3].stiffness[0] == pytest.approx(90.0) and damaged.records[3].stiffness[1] == pytest.approx(200.0)
-    # a record is the same whenever it is loaded (its own random stream)
-    np.testing.assert_array_equal(campaign.records[3].load().y, campaign.records[3].load().y)
-    with pytest.raises(ValueError, match="damage_element and damage_record"):
-        simulate_monitoring(3, damage_element=0)
-
-
-# ------------------------------------------------------------------------------ the batch
 
 
 def test_monitor_tracks_every_mode_of_the_simulator(serial, campaign):
@@ -93,10 +27,6 @@ def test_monitor_tracks_every_mode_of_the_simulator(serial, campaign):
     assert "temperature" in ds and ds.attrs["false_alarm_rate"] == 0.01
     assert set(serial.poles["tracked_mode"].dropna().unique()) <= set(range(1, 7))
     assert "24 records: 24 identified, 0 failed" in str(serial)
-
-
-def test_results_do_not_depend_on_the_number_of_threads(serial, campaign):
-    assert_same_tracks(serial, monitor(campaign.records, settings=SETTINGS, threads=2, progress=False))
 
 
 def test_store_round_trip_netcdf_zarr_parquet(serial, campaign, tmp_path):
@@ -155,14 +85,6 @@ def test_a_restart_removes_the_half_written_parts_of_a_killed_writer(campaign, t
     again = monitor(campaign.records[:6], settings=SETTINGS, out=out, progress=False,
                     tracking=TrackingSettings(reference_records=4))
     assert again.n_run == 0 and not torn.exists() and alive.exists()
-
-
-@pytest.fixture(scope="module")
-def csv_folder(tmp_path_factory):
-    folder = tmp_path_factory.mktemp("records") / "site"
-    camp = simulate_monitoring(20, n_samples=4000, seed=5)
-    camp.write(folder)
-    return folder, camp
 
 
 def test_a_corrupt_file_is_a_failure_with_its_stage_and_the_batch_goes_on(csv_folder, tmp_path):
@@ -284,21 +206,21 @@ def test_on_a_thread_pool_each_record_keeps_its_own_warnings_and_none_is_issued(
 
 
 def test_a_failed_part_write_stops_the_queued_records(campaign, tmp_path, monkeypatch):
-    import modaluq.monitoring as monitoring
+    from modaluq.monitoring import parts, run
 
     started = []
 
     def counted(task, config):
         started.append(task.key)
-        return monitoring_process_record(task, config)
+        return process_record(task, config)
 
-    monitoring_process_record = monitoring.process_record
-    monkeypatch.setattr(monitoring, "process_record", counted)
+    process_record = run.process_record
+    monkeypatch.setattr(run, "process_record", counted)
 
     def full_disk(self, key, text):
         raise OSError(28, "No space left on device")
 
-    monkeypatch.setattr(monitoring._Parts, "write", full_disk)
+    monkeypatch.setattr(parts.Parts, "write", full_disk)
     with pytest.raises(OSError, match="No space left"):
         monitor(campaign.records[:12], settings=SETTINGS, out=tmp_path / "t.nc", threads=1, progress=False)
     assert len(started) <= 2  # the one that failed to be written, and at most the one already running
@@ -376,145 +298,3 @@ def test_a_single_record_and_simulated_files_and_objects_name_their_channels_ali
                 covariates=tmp_path / "site.covariates.csv", tracking=TrackingSettings(reference_records=3))
     assert m.n_failed == 0 and list(m.dataset["channel"].values) == list(campaign.records[0].output_names)
     assert campaign.records[0].output_names == ("acc1", "acc2", "acc5")
-
-
-# ------------------------------------------------------------------------------ command line
-
-
-def test_cli_over_a_folder_of_csv_files(csv_folder, tmp_path, capsys):
-    folder, _ = csv_folder
-    out = tmp_path / "tracks.nc"
-    rc = main(["monitor", str(folder), "--out", str(out), "--orders", "2:24:2", "--reference-records", "10",
-               "--covariates", str(folder.with_name("site.covariates.csv")), "--plot", str(tmp_path / "f.png"),
-               "--threads", "2", "--no-progress", "--n-blocks", "40"])
-    captured = capsys.readouterr()
-    text = captured.out
-    assert rc == 0, text
-    assert "20 records: 20 identified, 0 failed" in text and out.exists() and (tmp_path / "f.png").exists()
-    ds = load_tracks(out)
-    assert ds["frequency_hz"].dims == ("record", "mode") and ds["alarm"].dims == ("record", "mode")
-    assert ds["alarm"].dtype == bool
-    # the records' identification warnings (blocks of 2 s: mode 1 decays more slowly than they are
-    # long in some records): counted on stderr, kept in the store
-    warned = [w for w in ds["warnings"].values if w]
-    assert warned and f"{len(warned)} of 20 records have identification warnings" in captured.err
-
-
-def test_cli_over_only_bad_files_exits_2_with_a_summary(tmp_path, capsys):
-    bad = tmp_path / "bad"
-    bad.mkdir()
-    for k in range(3):
-        (bad / f"r{k}.csv").write_text("t,a\n0,nan\n0.02,1\n")
-    rc = main(["monitor", str(bad), "--out", str(tmp_path / "t.nc"), "--no-progress"])
-    err = capsys.readouterr().err
-    assert rc == 2
-    assert "3 of 3 records failed (3 at load)" in err and "no record could be identified" in err
-    assert err.count("failed: ") == 3
-    assert main(["monitor", str(bad), "--out", str(tmp_path / "t.txt")]) == 2
-    assert "--out" in capsys.readouterr().err
-    # an image type matplotlib cannot write is refused before any record is run
-    assert main(["monitor", str(bad), "--out", str(tmp_path / "u.nc"), "--plot", str(tmp_path / "f.xyz")]) == 2
-    assert "--plot" in capsys.readouterr().err and not (tmp_path / "u.parts").exists()
-
-
-def test_cli_whose_reader_stops_reading_exits_0_with_every_file_written(csv_folder, tmp_path, monkeypatch):
-    # modaluq monitor ... | head -1: the summary meets a closed pipe after the files are written
-    folder, _ = csv_folder
-    read_end, write_end = os.pipe()
-    os.close(read_end)
-    closed = os.fdopen(write_end, "w", buffering=1)
-    monkeypatch.setattr(sys, "stdout", closed)
-    out = tmp_path / "t.nc"
-    rc = main(["monitor", str(folder), "--out", str(out), "--orders", "2:24:2", "--reference-records", "10",
-               "--plot", str(tmp_path / "f.png"), "--plot-control-chart", str(tmp_path / "c.png"), "--no-progress"])
-    monkeypatch.undo()
-    closed.close()
-    assert rc == 0 and out.exists() and (tmp_path / "f.png").exists() and (tmp_path / "c.png").exists()
-
-
-# ------------------------------------------------------------------------------ Dask
-
-
-@pytest.fixture(scope="module")
-def dask_client():
-    distributed = pytest.importorskip("distributed")
-    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) \
-            as cluster, distributed.Client(cluster) as client:
-        yield client
-
-
-@pytest.mark.slow
-def test_dask_local_cluster_gives_the_serial_results(dask_client, csv_folder, tmp_path):
-    folder, _ = csv_folder
-    files = record_files(folder)
-    cov = folder.with_name("site.covariates.csv")
-    eight = TrackingSettings(reference_records=8)
-    serial = monitor(files, settings=SETTINGS, threads=1, progress=False, covariates=cov, tracking=eight)
-    on_dask = monitor(files, settings=SETTINGS, executor=dask_client, progress=False, covariates=cov, tracking=eight)
-    assert_same_tracks(serial, on_dask, other_process=True)
-    # a corrupt file among them: reported, the others finish
-    (tmp_path / "corrupt.npz").write_bytes(b"PK\x03\x04 not a zip")
-    m = monitor(files + [tmp_path / "corrupt.npz"], settings=SETTINGS, executor=dask_client, progress=False,
-                covariates=cov, tracking=eight)
-    assert m.n_failed == 1 and m.failures.iloc[0]["stage"] == "load"
-    np.testing.assert_array_equal(m.dataset["frequency_hz"].values[:20], serial.dataset["frequency_hz"].values)
-    # a running scheduler by its address: the same results
-    by_address = monitor(files, settings=SETTINGS, scheduler=dask_client.scheduler.address, progress=False,
-                         covariates=cov, tracking=eight)
-    assert_same_tracks(serial, by_address, other_process=True)
-
-
-@pytest.mark.slow
-def test_a_killed_run_restarted_finishes_every_record_exactly_once(tmp_path):
-    pytest.importorskip("distributed")
-    folder = tmp_path / "site"
-    simulate_monitoring(20, n_samples=20000, seed=2).write(folder, format="npz")
-    out = tmp_path / "tracks.nc"
-    cmd = [sys.executable, "-m", "modaluq.cli", "monitor", str(folder), "--out", str(out), "--orders", "2:40:2",
-           "--workers", "2", "--no-progress"]
-    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
-    parts = tmp_path / "tracks.parts"
-    deadline = time.time() + 120
-    while time.time() < deadline and len(list(parts.glob("*.json"))) < 6:  # settings.json + 5 records
-        time.sleep(0.05)
-    os.killpg(proc.pid, signal.SIGKILL)  # the driver and its workers, mid-run
-    proc.wait()
-    done_before = {p.name: p.read_bytes() for p in parts.glob("*.json") if p.name != "settings.json"}
-    assert 5 <= len(done_before) < 20 and not out.exists()
-    again = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
-    assert again.returncode == 0, again.stderr
-    assert f"({20 - len(done_before)} run now" in again.stdout
-    ds = load_tracks(out)
-    names = list(ds["record"].values)
-    assert sorted(names) == sorted(f"record-{k:04d}.npz" for k in range(20)) and len(set(names)) == 20
-    assert (ds["status"].values == "done").all()
-    # the parts finished before the kill were not run again
-    assert all((parts / n).read_bytes() == b for n, b in done_before.items())
-    assert len([p for p in parts.glob("*.json") if p.name != "settings.json"]) == 20
-    assert not list(parts.glob(".*.tmp"))
-    json.loads((parts / "settings.json").read_text())
-
-
-@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="glibc's allocator")
-def test_a_worker_process_reuses_large_buffers_under_dasks_malloc_setting():
-    # Dask's nanny starts workers with MALLOC_TRIM_THRESHOLD_=65536, which also fixes glibc's mmap
-    # threshold at 128 KiB: every large temporary is then a fresh mmap whose pages fault in again
-    # (a record took 1.14 s instead of 0.83 s). After the worker's configuration they are reused.
-    code = """
-import resource, numpy as np
-from modaluq.monitoring import _configure_worker_process
-def faults():
-    before = resource.getrusage(resource.RUSAGE_SELF).ru_minflt
-    for _ in range(20):
-        np.ones(1 << 19).sum()  # 4 MiB, allocated and freed
-    return resource.getrusage(resource.RUSAGE_SELF).ru_minflt - before
-as_dask_starts_it = faults()
-_configure_worker_process()
-faults()  # the first buffer on the heap faults in once
-print(as_dask_starts_it, faults())
-"""
-    env = dict(os.environ, MALLOC_TRIM_THRESHOLD_="65536")
-    run = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True)
-    as_dask_starts_it, configured = map(int, run.stdout.split())
-    assert as_dask_starts_it > 20 * 256  # each 4 MiB buffer faults in again (here 514 faults of its 1024 pages)
-    assert configured < as_dask_starts_it / 10, (as_dask_starts_it, configured)

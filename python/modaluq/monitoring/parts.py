@@ -1,0 +1,140 @@
+"""Part files: every finished record kept on disk as soon as it arrives, so that a run restarts
+where it stopped (docs/monitoring.md §1).
+
+One JSON file per record in ``<store stem>.parts/``, named by a hash of the record's key, written
+atomically by the driver process (a killed run leaves whole parts only); ``settings.json``
+holds the fingerprint of the settings the parts were made with, and a run with other settings
+refuses to mix them. A part holds plain values (:func:`jsonable`): the status, the failed stage
+and its error, or the selected modes and their poles (:func:`record_modes` reads them back).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+
+from ..settings import ClusteringSettings, Settings, StabilityCriteria
+from .tracking import RecordModes
+
+__all__ = ["Parts", "array_of", "jsonable", "record_modes"]
+
+
+class Parts:
+    """One file per record in ``folder``, written atomically; ``settings.json`` guards the mix
+    (``config``: the records' :class:`~modaluq.monitoring.worker.TaskConfig`, by its fingerprint)."""
+
+    def __init__(self, folder: Path, config, start_again: bool = False):
+        self.folder = folder
+        folder.mkdir(parents=True, exist_ok=True)
+        _remove_stale_temporaries(folder)
+        stamp = folder / "settings.json"
+        fingerprint = json.loads(json.dumps(config.fingerprint()))
+        if start_again:  # resume=False: the parts of earlier runs (perhaps other settings) are dropped
+            for old in folder.glob("*.json"):
+                old.unlink()
+        if stamp.exists():
+            try:
+                previous = json.loads(stamp.read_text())
+            except ValueError:
+                previous = None
+            if previous != fingerprint:
+                changed = _changed_keys(previous, fingerprint)
+                raise ValueError(f"the part files in {folder} were made with other settings ({', '.join(changed)} "
+                                 "differ); run again with resume=False (--no-resume) to start again with these "
+                                 "settings, or write to another store")
+        else:
+            _atomic_write(stamp, json.dumps(fingerprint, indent=1).encode())
+
+    def path(self, key: str) -> Path:
+        return self.folder / f"{hashlib.sha1(key.encode()).hexdigest()[:20]}.json"
+
+    def read(self, key: str):
+        p = self.path(key)
+        try:
+            part = json.loads(p.read_text())
+        except (OSError, ValueError):
+            return None  # absent (or, impossibly with atomic writes, torn): run it again
+        return part if part.get("key") == key else None
+
+    def write(self, key: str, text: str) -> None:
+        """Write the part of ``key`` (``text``: its JSON)."""
+        _atomic_write(self.path(key), text.encode())
+
+
+def _changed_keys(old, new, prefix="") -> list:
+    """The dotted keys whose values differ between two fingerprints (e.g. ``settings.frequency_range``)."""
+    if not isinstance(old, dict) or not isinstance(new, dict):
+        return [prefix or "the file"] if old != new else []
+    keys = sorted(set(old) | set(new))
+    return [c for k in keys for c in _changed_keys(old.get(k), new.get(k), f"{prefix}{k}" if not prefix
+                                                   else f"{prefix}.{k}")]
+
+
+def _remove_stale_temporaries(folder: Path) -> None:
+    """Delete the half-written ``.<part>.<pid>.tmp`` files of writers that were killed: their
+    records have no part and run again. A file of a process still alive on this machine is kept
+    (two runs on one store are not supported, but one must not break the other's write)."""
+    for tmp in folder.glob(".*.tmp"):
+        try:
+            pid = int(tmp.name.rsplit(".", 2)[-2])
+        except ValueError:
+            pid = None
+        if pid is not None and pid != os.getpid() and _process_alive(pid):
+            continue
+        with contextlib.suppress(OSError):
+            tmp.unlink()
+
+
+def _process_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except (PermissionError, OSError):
+        return True  # exists, another user's
+    return True
+
+
+def _atomic_write(path: Path, data: bytes) -> None:
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    with open(tmp, "wb") as fh:
+        fh.write(data)
+        fh.flush()
+        os.fsync(fh.fileno())
+    os.replace(tmp, path)
+
+
+def jsonable(x):
+    """Arrays (complex ones as {"real", "imag"}) and NumPy scalars → JSON values; NaN stays NaN."""
+    if isinstance(x, dict):
+        return {str(k): jsonable(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [jsonable(v) for v in x]
+    if isinstance(x, np.ndarray):
+        if np.iscomplexobj(x):
+            return {"real": x.real.tolist(), "imag": x.imag.tolist()}
+        return x.tolist()
+    if isinstance(x, np.generic):
+        return x.item()
+    if isinstance(x, (Settings, StabilityCriteria, ClusteringSettings)):
+        return x.to_dict()
+    return x
+
+
+def array_of(value, dtype=float):
+    if isinstance(value, dict) and set(value) == {"real", "imag"}:
+        return np.asarray(value["real"], float) + 1j * np.asarray(value["imag"], float)
+    return np.asarray(value, dtype)
+
+
+def record_modes(part: dict) -> RecordModes:
+    """The selected modes of a part (a record identified), as tracking reads them."""
+    m = part["modes"]
+    return RecordModes(**{k: array_of(m[k], complex if k == "mode_shape" else float) for k in (
+        "frequency_hz", "damping_ratio", "frequency_std", "damping_std", "frequency_damping_correlation",
+        "mode_shape", "mode_shape_std_real", "mode_shape_std_imag")})

@@ -1,0 +1,144 @@
+"""One record → one part: load, preprocess, identify, select (the :class:`~modaluq.Analysis` of
+``modaluq identify`` with the same settings objects), in a worker thread or process.
+
+:func:`process_record` never raises: a record's failure is kept with the stage it failed at
+(``load``, ``preprocess``, ``identify``, ``select``) and its error, and the batch goes on. What it
+returns is plain values (docs/monitoring.md §1), sent back to the driver, which keeps it as the
+record's part (:mod:`modaluq.monitoring.parts`).
+"""
+
+from __future__ import annotations
+
+import time
+import traceback
+import warnings
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..analysis import Analysis
+from ..settings import ClusteringSettings, Settings, StabilityCriteria
+from ..version import __version__
+from .executors import configure_worker_process
+from .parts import jsonable
+from .records import RecordTask
+
+__all__ = ["TaskConfig", "frequency_damping_correlation", "process_record"]
+
+
+@dataclass(frozen=True)
+class TaskConfig:
+    """The settings every record is run with (the part files remember them)."""
+
+    settings: Settings = field(default_factory=Settings)
+    criteria: StabilityCriteria = field(default_factory=StabilityCriteria)
+    clustering: ClusteringSettings = field(default_factory=ClusteringSettings)
+    read: dict = field(default_factory=dict)  #: fs, format, read_options, outputs, inputs, references
+    check_harmonics: bool = False             #: flag modes that may be harmonics (costs about an identification)
+    worker_process: bool = False              #: the task runs in a worker process (Dask, process pools)
+
+    def fingerprint(self) -> dict:
+        return {"modaluq": __version__, "settings": self.settings.to_dict(), "criteria": self.criteria.to_dict(),
+                "clustering": self.clustering.to_dict(), "read": jsonable(self.read),
+                "check_harmonics": self.check_harmonics}
+
+
+def process_record(task: RecordTask, config: TaskConfig) -> dict:
+    """Run one record; never raises. Returns plain values: the status, the stage that failed and
+    its error, or the selected modes and their poles."""
+    t0 = time.perf_counter()
+    stage = "load"
+    out = {"key": task.key, "name": task.name, "status": "failed", "stage": "", "error": "", "warnings": []}
+    try:
+        if config.worker_process:
+            configure_worker_process()
+        analysis = _analysis(task, config)
+        stage = "preprocess"
+        analysis.preprocess()
+
+        def step(what):
+            nonlocal stage
+            stage = "identify" if what == "identifying" else "select"
+
+        # the identification's warnings are kept, as text, in analysis.warnings and not issued:
+        # Python's warning filters are global, and records run at once on threads would mix them
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # anything else a record's steps may warn of
+            analysis.run(check_harmonics=config.check_harmonics, progress=step, issue_warnings=False)
+        stage = "select"
+        out.update(_modes_of(analysis))
+        out.update(status="done", stage="", warnings=list(analysis.warnings))
+    except MemoryError:
+        out.update(stage=stage, error="out of memory")
+    except Exception as exc:  # the record's failure, kept with its stage; the batch goes on
+        out.update(stage=stage, error=f"{type(exc).__name__}: {' '.join(str(exc).split())}")
+        if not isinstance(exc, (ValueError, TypeError, OSError)):
+            out["traceback"] = traceback.format_exc(limit=6)
+    out["seconds"] = time.perf_counter() - t0
+    return out
+
+
+def _analysis(task: RecordTask, config: TaskConfig) -> Analysis:
+    read = dict(config.read)
+    common = dict(references=read.get("references"), settings=config.settings, criteria=config.criteria,
+                  clustering=config.clustering)
+    if isinstance(task.source, str):
+        return Analysis.from_file(task.source, fs=read.get("fs"), format=read.get("format"),
+                                  read_options=read.get("read_options"), outputs=read.get("outputs"),
+                                  inputs=read.get("inputs"), **common)
+    rec = task.source.load() if hasattr(task.source, "load") else task.source
+    u = getattr(rec, "u", None)
+    if u is not None and np.asarray(u).size == 0:
+        u = None
+    names = getattr(rec, "output_names", None) or getattr(task.source, "output_names", None) or None
+    return Analysis.from_arrays(rec.y, u, fs=rec.fs, output_names=names, **common)
+
+
+def frequency_damping_correlation(analysis: Analysis) -> np.ndarray:
+    """(m,) the correlation of f and ξ at each selected mode's representative pole (NaN without
+    uncertainty), found again in the :class:`~modaluq.Result` at the pole's order: the pole's index
+    within its order, checked by its frequency. The core does not report it yet (issue 22)."""
+    sel, d, res = analysis.selected, analysis.diagram, analysis.result
+    m = sel.n_modes
+    rho = np.full(m, np.nan)
+    first_of_order = {o: int(np.flatnonzero(d.order == o)[0]) for o in np.unique(d.order)}
+    for i in range(m):
+        pole = int(sel.representative_pole[i])
+        order = int(d.order[pole])
+        modes = res.at_order(order)
+        j = pole - first_of_order[order]
+        if modes.covariance is not None and 0 <= j < modes.n_modes \
+                and np.isclose(modes.frequency_hz[j], d.frequency_hz[pole], rtol=1e-12):
+            c = modes.covariance[j]
+            if c[0, 0] > 0 and c[1, 1] > 0:
+                rho[i] = c[0, 1] / np.sqrt(c[0, 0] * c[1, 1])
+    return rho
+
+
+def _modes_of(analysis: Analysis) -> dict:
+    """The selected modes (with the f-ξ correlation of each representative pole) and their poles."""
+    sel, d, res = analysis.selected, analysis.diagram, analysis.result
+    m = sel.n_modes
+    rho = frequency_damping_correlation(analysis)
+    members = [np.asarray(mem, np.int64) for mem in sel.members]
+    pole_mode = np.concatenate([np.full(len(mem), i + 1) for i, mem in enumerate(members)]) if m else np.zeros(0, int)
+    pole_index = np.concatenate(members) if m else np.zeros(0, np.int64)
+    return {
+        "output_names": list(analysis.output_names), "fs_hz": float(analysis.fs), "n_blocks": int(res.n_blocks),
+        "n_samples": int(analysis.y.shape[0]),
+        "modes": {
+            "frequency_hz": sel.frequency_hz, "damping_ratio": sel.damping_ratio,
+            "frequency_std": sel.frequency_std, "damping_std": sel.damping_std,
+            "frequency_damping_correlation": rho, "mode_shape": sel.mode_shape,
+            "mode_shape_std_real": sel.mode_shape_std_real, "mode_shape_std_imag": sel.mode_shape_std_imag,
+            "n_poles": sel.n_poles, "representative_order": sel.representative_order,
+            "possible_harmonic": (analysis.possible_harmonic if analysis.possible_harmonic.size == m
+                                  else np.zeros(m, bool)),
+        },
+        "poles": {
+            "selected_mode": pole_mode, "order": d.order[pole_index],
+            "representative": np.isin(pole_index, sel.representative_pole),
+            "frequency_hz": d.frequency_hz[pole_index], "damping_ratio": d.damping_ratio[pole_index],
+            "frequency_std": d.frequency_std[pole_index], "damping_std": d.damping_std[pole_index],
+        },
+    }

@@ -1,0 +1,24 @@
+"""Fixtures of the monitoring tests: a simulated campaign, its serial run, a folder of its files."""
+
+import pytest
+from monitoring_support import SETTINGS
+
+from modaluq.monitoring import monitor, simulate_monitoring
+
+
+@pytest.fixture(scope="module")
+def campaign():
+    return simulate_monitoring(24, n_samples=6000, seed=11)
+
+
+@pytest.fixture(scope="module")
+def serial(campaign):
+    return monitor(campaign.records, settings=SETTINGS, threads=1, progress=False)
+
+
+@pytest.fixture(scope="module")
+def csv_folder(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("records") / "site"
+    camp = simulate_monitoring(20, n_samples=4000, seed=5)
+    camp.write(folder)
+    return folder, camp
