@@ -161,7 +161,7 @@ def test_cli_help_shows_the_library_defaults():
 
 def test_monitor_and_validate_options_default_to_the_library():
     from modaluq.cli.validate import DEFAULTS
-    from modaluq.tracking import TrackingSettings
+    from modaluq.monitoring import TrackingSettings
 
     commands = build_parser()._subparsers._group_actions[0].choices
     args = build_parser().parse_args(["monitor", "records/", "--out", "t.nc"])

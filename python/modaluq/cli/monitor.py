@@ -27,6 +27,19 @@ TRACKING_OPTIONS = {"reference_records": "reference_records", "false_alarm_rate"
                     "smoothing": "smoothing", "tracking_min_mac": "min_mac"}
 
 
+class _TrackingDefaults(argparse.HelpFormatter):
+    """Help that shows the tracking defaults of :class:`~modaluq.monitoring.TrackingSettings`
+    (``{tracking.smoothing}`` in a help text), importing the wing only when help is printed."""
+
+    def _get_help_string(self, action):
+        text = super()._get_help_string(action)
+        if text and "{tracking." in text:
+            from ..monitoring import TrackingSettings
+
+            text = text.format(tracking=TrackingSettings())
+        return text
+
+
 def run(args) -> int:
     """Execute ``modaluq monitor`` for parsed ``args``; return the exit status."""
     from ..monitoring import TrackingSettings, monitor  # the wing: only for this command
@@ -109,7 +122,7 @@ def run(args) -> int:
 def register(subparsers) -> argparse.ArgumentParser:
     """Add the ``monitor`` subcommand to the ``modaluq`` command line."""
     p = subparsers.add_parser(
-        "monitor",
+        "monitor", formatter_class=_TrackingDefaults,
         help="identify many records, track the modes and test their changes",
         description="Identify every record (files, folders or glob patterns) with the same settings, track the "
                     "modes from record to record against a reference period with a sigma-aware assignment, and "
@@ -125,22 +138,22 @@ def register(subparsers) -> argparse.ArgumentParser:
                         "part files STEM.parts/")
     add_analysis_options(p)
     g = p.add_argument_group("tracking and change test")
-    t = TrackingSettings()  # the library's defaults, shown in the help
     g.add_argument("--reference-records", type=integer_option(3), default=None, metavar="K",
-                   help=f"the first K identified records are the reference period (default {t.reference_records})")
+                   help="the first K identified records are the reference period "
+                        "(default {tracking.reference_records})")
     g.add_argument("--reference-span", nargs=2, metavar=("START", "END"), default=None,
                    help="the records between these times (ISO 8601) are the reference period instead")
     g.add_argument("--covariates", metavar="CSV", default=None,
                    help="table with a 'record' column (file names), optionally 'time', and numeric columns "
                         "(temperature ...) the frequencies and damping ratios are regressed on")
     g.add_argument("--false-alarm-rate", type=real_option(0, 0.5), default=None, metavar="P",
-                   help=f"probability of an alarm at a record and mode when nothing changed "
-                        f"(default {t.false_alarm_rate:g})")
+                   help="probability of an alarm at a record and mode when nothing changed "
+                        "(default {tracking.false_alarm_rate:g})")
     g.add_argument("--smoothing", type=real_option(0, 1), default=None, metavar="LAMBDA",
-                   help=f"EWMA weight of the newest record in the control statistic (default {t.smoothing:g}; "
+                   help="EWMA weight of the newest record in the control statistic (default {tracking.smoothing:g}; "
                         "1: each record tested on its own)")
     g.add_argument("--tracking-min-mac", type=real_option(0, 1, low_open=False), default=None, metavar="MAC",
-                   help=f"smallest MAC between a record's mode and a reference mode (default {t.min_mac:g})")
+                   help="smallest MAC between a record's mode and a reference mode (default {tracking.min_mac:g})")
     g.add_argument("--check-harmonics", action="store_true",
                    help="flag modes that may be harmonics of the excitation (costs about one more identification)")
     g.add_argument("--inflate-to-reference", action="store_true",
