@@ -173,6 +173,12 @@ class Result:
     significant_singular_values: int = 0
     warnings: tuple = field(default_factory=tuple)
     output_names: tuple = ()          #: one name per output channel (default y0, y1, ...)
+    #: The core's ``Identification`` these modes were read from, set by :func:`identify` and
+    #: ``CovarianceAccumulator.identify`` (:func:`result_from_core`): the diagram is made from it
+    #: by the core (``_core.poles_of``). ``None`` for a Result made otherwise (by hand,
+    #: ``dataclasses.replace``, unpickled): the diagram then flattens :attr:`modes`
+    #: (:func:`modaluq.stabilization_diagram`).
+    _identification: object = field(default=None, init=False, repr=False, compare=False)
 
     @property
     def orders(self) -> tuple:
@@ -187,6 +193,12 @@ class Result:
 
     def __iter__(self):
         return iter(self.modes)
+
+    def __getstate__(self):
+        # the core's objects do not pickle; a copy falls back to its modes (same numbers)
+        state = dict(self.__dict__)
+        state.pop("_identification", None)
+        return state
 
     def __len__(self) -> int:
         return len(self.modes)
@@ -267,7 +279,8 @@ class Result:
 
 
 def result_from_core(ident, settings, n_outputs, n_inputs, extra_warnings=(), output_names=()) -> Result:
-    return Result(
+    """The :class:`Result` of the core's ``Identification`` ``ident``, which it keeps."""
+    result = Result(
         output_names=tuple(output_names) or tuple(f"y{k}" for k in range(n_outputs)),
         modes=tuple(Modes._from_core(m) for m in ident.modes),
         fs=settings["fs"],
@@ -290,6 +303,8 @@ def result_from_core(ident, settings, n_outputs, n_inputs, extra_warnings=(), ou
         significant_singular_values=int(ident.significant_singular_values),
         warnings=tuple(ident.warnings) + tuple(extra_warnings),
     )
+    object.__setattr__(result, "_identification", ident)
+    return result
 
 
 def warn_all(result: Result, stacklevel: int = 3) -> None:

@@ -190,6 +190,10 @@ def select_modes(diagram: Diagram, settings: ClusteringSettings | None = None, *
     """
     if not isinstance(diagram, Diagram):
         raise TypeError(f"diagram must be a Diagram (from stabilization_diagram); got {type(diagram).__name__}")
+    core_diagram = getattr(diagram, "_core_diagram", None)  # the core's own, kept by stabilization_diagram
+    if core_diagram is None:
+        raise ValueError("diagram was not made by stabilization_diagram (constructed, copied or unpickled): "
+                         "make it again with stabilization_diagram(result)")
     if settings is None:
         settings = ClusteringSettings(**kwargs)
     elif kwargs:
@@ -197,7 +201,7 @@ def select_modes(diagram: Diagram, settings: ClusteringSettings | None = None, *
     elif not isinstance(settings, ClusteringSettings):
         raise TypeError(f"settings must be a ClusteringSettings; got {type(settings).__name__}")
 
-    sel = _core.select_modes(diagram.to_core(), settings.to_core())
+    sel = _core.select_modes(core_diagram, settings.to_core())
     return SelectedModes(
         frequency_hz=sel.frequency_hz, damping_ratio=sel.damping_ratio, mode_shape=sel.mode_shape,
         frequency_std=sel.frequency_std, damping_std=sel.damping_std,
