@@ -11,10 +11,11 @@ mode shape at every model order, computed from one dataset.
 
 The modules form layers, each importing only those below it (docs/architecture.md):
 ``checks`` → ``settings``, ``preprocess``, ``auto_settings``, ``spectrum``, ``harmonics`` →
-``results`` → ``identification``, ``streaming`` → ``stabilization`` → ``selection`` →
-``horizons``, ``analysis`` → ``plot``, ``export`` → ``monitoring`` (many records: ``monitor``) →
-``cli``; ``tracking`` sits beside ``selection``; ``io``, ``simulate`` and ``monitoring_simulator``
-are side leaves, ``validation`` sits on identification and the simulator.
+``plot``, ``export`` → ``selection`` → ``stabilization`` → ``results`` → ``identification``,
+``streaming`` → ``horizons``, ``analysis`` → ``monitoring`` (many records: ``monitor``) →
+``cli``: a result type sits above what its convenience methods reach (``Result.plot()``);
+``tracking`` sits beside ``results``; ``io``, ``simulate`` and ``monitoring_simulator`` are side
+leaves, ``validation`` sits on identification and the simulator.
 """
 
 from ._core import NumericalError

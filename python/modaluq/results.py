@@ -1,8 +1,9 @@
 """Result types of an identification: :class:`Modes` (one model order) and :class:`Result` (a run).
 
 Plain frozen dataclasses over the core's arrays: they print, convert to pandas and, through
-convenience methods, form the stabilization diagram and plot (those import the layers above
-them when called: the one upward edge the package allows, docs/architecture.md).
+convenience methods, form the stabilization diagram, select modes and plot. This module sits
+above :mod:`~modaluq.stabilization` and :mod:`~modaluq.selection` (which take a Result by its
+fields), so those methods import downwards (docs/architecture.md).
 """
 
 from __future__ import annotations
@@ -13,6 +14,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .checks import check_boolean
+from .selection import select_modes
+from .stabilization import stabilization_diagram
 
 __all__ = ["ModalUQWarning", "Modes", "Result", "result_from_core", "warn_all"]
 
@@ -214,14 +217,10 @@ class Result:
 
     def stabilization_diagram(self, criteria=None, **kwargs):
         """The stabilization diagram of this run (see :func:`modaluq.stabilization_diagram`)."""
-        from .stabilization import stabilization_diagram
-
         return stabilization_diagram(self, criteria, **kwargs)
 
     def select_modes(self, criteria=None, settings=None):
         """Physical modes chosen automatically from the stable poles (see :func:`modaluq.select_modes`)."""
-        from .selection import select_modes
-
         return select_modes(self.stabilization_diagram(criteria), settings)
 
     def plot(self, ax=None, *, y=None, criteria=None, select: bool = True, **kwargs):
@@ -232,8 +231,6 @@ class Result:
         diagram = self.stabilization_diagram(criteria)
         selected = None
         if check_boolean("select", select):
-            from .selection import select_modes
-
             selected = select_modes(diagram)
         return diagram.plot(ax, y=y, selected=selected, **kwargs)
 

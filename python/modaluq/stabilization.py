@@ -11,10 +11,12 @@ frequency change measured in standard deviations, ``|Δf| <= k sqrt(σ1² + σ2�
 gets a :class:`~modaluq.PoleStatus` and, unless stable, a ``reason`` saying which test failed
 and by how much. Grouping the stable poles into modes is :mod:`modaluq.selection`.
 
-The judging runs in the C++ core (``cpp/include/modaluq/stabilization.hpp``), so C++ software
-embedding the core gets the same diagram; this module translates the result into a
-:class:`Diagram` (tables, exports, plots). ``tests/python/test_stabilization_core.py`` checks
-the core against an independent NumPy/SciPy implementation. Everything is deterministic.
+The poles and their judging are the C++ core's (``cpp/include/modaluq/stabilization.hpp``:
+``poles_of`` the identification a :class:`~modaluq.Result` keeps, ``stabilization_diagram``), so
+C++ software embedding the core gets the same diagram; this module reads it into a
+:class:`Diagram` (tables, exports, plots), which keeps the core's diagram for the selection.
+``tests/python/test_stabilization_core.py`` checks the core against an independent NumPy/SciPy
+implementation. Everything is deterministic.
 
 >>> import modaluq
 >>> sim = modaluq.simulate(50_000, seed=2)
@@ -32,7 +34,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import _core
-from .results import Result
+from .selection import select_modes
 from .settings import STATUS_OF_CORE, PoleStatus, StabilityCriteria
 
 __all__ = ["Diagram", "modal_assurance_criterion", "stabilization_diagram"]
@@ -180,8 +182,6 @@ class Diagram:
 
     def select_modes(self, settings=None, **kwargs):
         """Shorthand for :func:`modaluq.select_modes` (``kwargs``: fields of :class:`~modaluq.ClusteringSettings`)."""
-        from .selection import select_modes
-
         return select_modes(self, settings, **kwargs)
 
     def plot(self, ax=None, *, y=None, spectrum=None, selected=None, show_rejected=True, nperseg=None,
@@ -222,7 +222,9 @@ def stabilization_diagram(result, criteria: StabilityCriteria | None = None, *,
     Diagram
         Every pole with its :class:`PoleStatus` and, for the others than stable, the reason.
     """
-    if not isinstance(result, Result):
+    # a Result is known by its fields: results.py sits above this module (its Result.stabilization_diagram
+    # calls this function), and a module imports the types it makes, not those it takes
+    if not all(hasattr(result, k) for k in ("modes", "fs", "n_outputs", "settings")):
         raise TypeError(f"result must be a modaluq.Result (from modaluq.identify); got {type(result).__name__}")
     if criteria is None:
         criteria = StabilityCriteria(**kwargs)
@@ -240,7 +242,7 @@ def stabilization_diagram(result, criteria: StabilityCriteria | None = None, *,
     has_std = all(m.has_uncertainty for m in result.modes)
     ident = getattr(result, "_identification", None)  # the core's, kept by identify() (results.py)
     poles = _core.poles_of(ident) if ident is not None else _poles_of_modes(result, has_std)
-    if poles.mode_shape.shape[0] != n_out:  # no pole at all: the core cannot tell the channels
+    if poles.frequency_hz.size == 0:  # no pole: the shapes keep one row per channel all the same
         poles.mode_shape = np.zeros((n_out, 0), complex)
         poles.mode_shape_std_real = poles.mode_shape_std_imag = np.zeros((n_out, 0))
 
