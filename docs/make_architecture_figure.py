@@ -15,12 +15,12 @@ from matplotlib.patches import FancyArrowPatch, FancyBboxPatch
 PYTHON = [
     ("command line", "cli/  (identify · monitor · demo · validate)"),
     ("monitoring wing", "monitoring/  (run · records · worker · executors · parts · tracking · change · store · plot)"),
-    ("plot and export", "plot · export"),
     ("analysis", "analysis · horizons · validation/"),
-    ("selection", "selection"),
-    ("stabilization", "stabilization"),
     ("identification", "identification · streaming"),
     ("result types", "results"),
+    ("stabilization", "stabilization"),
+    ("selection", "selection"),
+    ("plot and export", "plot · export"),
     ("settings, signal", "settings · preprocess · auto_settings · spectrum · harmonics · provenance"),
     ("argument checks", "checks"),
     ("C++ core", "_core (pybind11: translation only) · _blas · version"),
@@ -60,9 +60,9 @@ def main(path=Path(__file__).resolve().parent / "img" / "architecture.png"):
         ax.text(0.875, 0.615, f"{label}: only checks below them", ha="center", fontsize=8, color="0.3")
     ax.text(0.875, 0.45, "used by analysis (io),\nvalidation and demo (simulate)", ha="center", va="top", fontsize=7.5,
             color="0.35")
-    ax.text(0.875, 0.86, "the one upward edge:\nconvenience methods of results\n(Result.plot(), Diagram.select_modes(),\n"
-            "SelectedModes.to_dict() ...)\nimport inside the method", ha="center", va="center", fontsize=7.5,
-            color="0.35", bbox=dict(fc="white", ec="0.7", lw=0.6))
+    ax.text(0.875, 0.86, "no upward edge: a result type sits\nabove what its convenience methods reach:\n"
+            "Result.plot() → Diagram.select_modes()\n→ SelectedModes.to_dict();\nfunctions take types by their fields",
+            ha="center", va="center", fontsize=7.5, color="0.35", bbox=dict(fc="white", ec="0.7", lw=0.6))
     # the C++ pipeline, wired once in identify.hpp
     ax.text(0.5, 0.19, "C++ core (cpp/include/modaluq, header-only, sans-IO): one straight line, wired in identify.hpp; "
             "internals in detail/", ha="center", fontsize=8.5)

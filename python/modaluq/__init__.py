@@ -11,10 +11,11 @@ mode shape at every model order, computed from one dataset.
 
 The modules form layers, each importing only those below it (docs/architecture.md):
 ``checks`` → ``settings``, ``preprocess``, ``auto_settings``, ``spectrum``, ``harmonics`` →
-``results`` → ``identification``, ``streaming`` → ``stabilization`` → ``selection`` →
-``horizons``, ``analysis`` → ``plot``, ``export`` → the ``monitoring/`` wing (many records:
-``monitor``) → ``cli``; ``io``, ``simulate`` and ``monitoring.simulator`` are side leaves,
-``validation`` sits on identification and the simulator.
+``plot``, ``export`` → ``selection`` → ``stabilization`` → ``results`` → ``identification``,
+``streaming`` → ``horizons``, ``analysis`` → the ``monitoring/`` wing (many records: ``monitor``)
+→ ``cli``: a result type sits above what its convenience methods reach (``Result.plot()``);
+``io``, ``simulate`` and ``monitoring.simulator`` are side leaves, ``validation`` sits on
+identification and the simulator.
 
 The wing's names here (``monitor``, ``Monitoring``, ``load_tracks``, ``simulate_monitoring``,
 ``TrackingSettings``) are resolved on first use: ``import modaluq`` does not import the wing.

@@ -22,7 +22,6 @@ from matplotlib.figure import Figure
 from .checks import check_boolean, check_integer
 from .settings import PoleStatus
 from .spectrum import output_spectrum_singular_values
-from .stabilization import Diagram
 
 __all__ = ["DIAGRAM_FIGSIZE", "STATUS_STYLE", "plot_mode_shapes", "plot_stabilization_diagram"]
 
@@ -104,7 +103,8 @@ def plot_stabilization_diagram(diagram, ax=None, *, y=None, spectrum=None, selec
         ``"<label> (<count>)"``. Noise-coupled poles that are not rejected (their σ is not a
         first-order value, docs/uq-math.md §5.5) are drawn without a σ bar and ringed.
     """
-    if not isinstance(diagram, Diagram):
+    # known by its fields: the result types sit above the plots (their plot() methods call them)
+    if not all(hasattr(diagram, k) for k in ("orders", "order", "frequency_hz", "status", "frequency_std")):
         raise TypeError(f"diagram must be a modaluq Diagram; got {type(diagram).__name__}")
     if y is not None and spectrum is not None:
         raise TypeError("pass y or spectrum, not both")

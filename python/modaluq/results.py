@@ -1,8 +1,9 @@
 """Result types of an identification: :class:`Modes` (one model order) and :class:`Result` (a run).
 
 Plain frozen dataclasses over the core's arrays: they print, convert to pandas and, through
-convenience methods, form the stabilization diagram and plot (those import the layers above
-them when called: the one upward edge the package allows, docs/architecture.md).
+convenience methods, form the stabilization diagram, select modes and plot. This module sits
+above :mod:`~modaluq.stabilization` and :mod:`~modaluq.selection` (which take a Result by its
+fields), so those methods import downwards (docs/architecture.md).
 """
 
 from __future__ import annotations
@@ -13,6 +14,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .checks import check_boolean
+from .selection import select_modes
+from .stabilization import stabilization_diagram
 
 __all__ = ["ModalUQWarning", "Modes", "Result", "result_from_core", "warn_all"]
 
@@ -173,6 +176,12 @@ class Result:
     significant_singular_values: int = 0
     warnings: tuple = field(default_factory=tuple)
     output_names: tuple = ()          #: one name per output channel (default y0, y1, ...)
+    #: The core's ``Identification`` these modes were read from, set by :func:`identify` and
+    #: ``CovarianceAccumulator.identify`` (:func:`result_from_core`): the diagram is made from it
+    #: by the core (``_core.poles_of``). ``None`` for a Result made otherwise (by hand,
+    #: ``dataclasses.replace``, unpickled): the diagram then flattens :attr:`modes`
+    #: (:func:`modaluq.stabilization_diagram`).
+    _identification: object = field(default=None, init=False, repr=False, compare=False)
 
     @property
     def orders(self) -> tuple:
@@ -188,6 +197,12 @@ class Result:
     def __iter__(self):
         return iter(self.modes)
 
+    def __getstate__(self):
+        # the core's objects do not pickle; a copy falls back to its modes (same numbers)
+        state = dict(self.__dict__)
+        state.pop("_identification", None)
+        return state
+
     def __len__(self) -> int:
         return len(self.modes)
 
@@ -202,14 +217,10 @@ class Result:
 
     def stabilization_diagram(self, criteria=None, **kwargs):
         """The stabilization diagram of this run (see :func:`modaluq.stabilization_diagram`)."""
-        from .stabilization import stabilization_diagram
-
         return stabilization_diagram(self, criteria, **kwargs)
 
     def select_modes(self, criteria=None, settings=None):
         """Physical modes chosen automatically from the stable poles (see :func:`modaluq.select_modes`)."""
-        from .selection import select_modes
-
         return select_modes(self.stabilization_diagram(criteria), settings)
 
     def plot(self, ax=None, *, y=None, criteria=None, select: bool = True, **kwargs):
@@ -220,8 +231,6 @@ class Result:
         diagram = self.stabilization_diagram(criteria)
         selected = None
         if check_boolean("select", select):
-            from .selection import select_modes
-
             selected = select_modes(diagram)
         return diagram.plot(ax, y=y, selected=selected, **kwargs)
 
@@ -267,7 +276,8 @@ class Result:
 
 
 def result_from_core(ident, settings, n_outputs, n_inputs, extra_warnings=(), output_names=()) -> Result:
-    return Result(
+    """The :class:`Result` of the core's ``Identification`` ``ident``, which it keeps."""
+    result = Result(
         output_names=tuple(output_names) or tuple(f"y{k}" for k in range(n_outputs)),
         modes=tuple(Modes._from_core(m) for m in ident.modes),
         fs=settings["fs"],
@@ -290,6 +300,8 @@ def result_from_core(ident, settings, n_outputs, n_inputs, extra_warnings=(), ou
         significant_singular_values=int(ident.significant_singular_values),
         warnings=tuple(ident.warnings) + tuple(extra_warnings),
     )
+    object.__setattr__(result, "_identification", ident)
+    return result
 
 
 def warn_all(result: Result, stacklevel: int = 3) -> None:

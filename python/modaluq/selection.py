@@ -20,7 +20,6 @@ import numpy as np
 
 from . import _core
 from .settings import ClusteringSettings
-from .stabilization import Diagram
 
 __all__ = ["SelectedModes", "select_modes"]
 
@@ -146,7 +145,7 @@ class SelectedModes:
         return plot_mode_shapes(self, fig=fig, channel_positions=channel_positions)
 
 
-def select_modes(diagram: Diagram, settings: ClusteringSettings | None = None, **kwargs) -> SelectedModes:
+def select_modes(diagram, settings: ClusteringSettings | None = None, **kwargs) -> SelectedModes:
     """Group the stable poles of a diagram into physical modes (deterministic).
 
     Method:
@@ -188,8 +187,12 @@ def select_modes(diagram: Diagram, settings: ClusteringSettings | None = None, *
     SelectedModes
         Sorted by frequency; empty when no pole qualifies.
     """
-    if not isinstance(diagram, Diagram):
-        raise TypeError(f"diagram must be a Diagram (from stabilization_diagram); got {type(diagram).__name__}")
+    # the core's diagram, kept by stabilization_diagram (stabilization.py sits above this module)
+    core_diagram = getattr(diagram, "_core_diagram", None)
+    if not isinstance(core_diagram, _core.Diagram):
+        raise TypeError(f"diagram must be a Diagram made by stabilization_diagram (a constructed, copied or "
+                        f"unpickled one is not: make it again with stabilization_diagram(result)); "
+                        f"got {type(diagram).__name__}")
     if settings is None:
         settings = ClusteringSettings(**kwargs)
     elif kwargs:
@@ -197,7 +200,7 @@ def select_modes(diagram: Diagram, settings: ClusteringSettings | None = None, *
     elif not isinstance(settings, ClusteringSettings):
         raise TypeError(f"settings must be a ClusteringSettings; got {type(settings).__name__}")
 
-    sel = _core.select_modes(diagram.to_core(), settings.to_core())
+    sel = _core.select_modes(core_diagram, settings.to_core())
     return SelectedModes(
         frequency_hz=sel.frequency_hz, damping_ratio=sel.damping_ratio, mode_shape=sel.mode_shape,
         frequency_std=sel.frequency_std, damping_std=sel.damping_std,

@@ -11,10 +11,12 @@ frequency change measured in standard deviations, ``|Δf| <= k sqrt(σ1² + σ2�
 gets a :class:`~modaluq.PoleStatus` and, unless stable, a ``reason`` saying which test failed
 and by how much. Grouping the stable poles into modes is :mod:`modaluq.selection`.
 
-The judging runs in the C++ core (``cpp/include/modaluq/stabilization.hpp``), so C++ software
-embedding the core gets the same diagram; this module translates the result into a
-:class:`Diagram` (tables, exports, plots). ``tests/python/test_stabilization_core.py`` checks
-the core against an independent NumPy/SciPy implementation. Everything is deterministic.
+The poles and their judging are the C++ core's (``cpp/include/modaluq/stabilization.hpp``:
+``poles_of`` the identification a :class:`~modaluq.Result` keeps, ``stabilization_diagram``), so
+C++ software embedding the core gets the same diagram; this module reads it into a
+:class:`Diagram` (tables, exports, plots), which keeps the core's diagram for the selection.
+``tests/python/test_stabilization_core.py`` checks the core against an independent NumPy/SciPy
+implementation. Everything is deterministic.
 
 >>> import modaluq
 >>> sim = modaluq.simulate(50_000, seed=2)
@@ -32,8 +34,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import _core
-from .results import Result
-from .settings import CORE_OF_STATUS, STATUS_OF_CORE, PoleStatus, StabilityCriteria
+from .selection import select_modes
+from .settings import STATUS_OF_CORE, PoleStatus, StabilityCriteria
 
 __all__ = ["Diagram", "modal_assurance_criterion", "stabilization_diagram"]
 
@@ -42,7 +44,8 @@ def modal_assurance_criterion(shape_a, shape_b) -> np.ndarray:
     """Modal assurance criterion between every column of ``shape_a`` and every column of ``shape_b``.
 
     ``MAC_ij = |a_iᴴ b_j|² / ((a_iᴴ a_i)(b_jᴴ b_j))``, between 0 (orthogonal) and 1 (collinear),
-    invariant to the complex scaling of either shape.
+    invariant to the complex scaling of either shape. Computed by the core
+    (``stabilization.hpp``): the MAC the diagram and the selection use.
 
     Parameters
     ----------
@@ -67,13 +70,7 @@ def modal_assurance_criterion(shape_a, shape_b) -> np.ndarray:
     if a.ndim != 2 or b.ndim != 2 or a.shape[0] != b.shape[0]:
         raise ValueError(f"shape_a and shape_b must have the same number of rows (outputs); "
                          f"got shapes {np.shape(shape_a)} and {np.shape(shape_b)}")
-    cross = np.abs(a.conj().T @ b) ** 2
-    na = np.real(np.sum(a.conj() * a, axis=0))
-    nb = np.real(np.sum(b.conj() * b, axis=0))
-    denom = np.outer(na, nb)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        mac = np.where(denom > 0, cross / np.where(denom > 0, denom, 1.0), 0.0)
-    return np.clip(mac, 0.0, 1.0)
+    return _core.modal_assurance_criterion(a.astype(complex, copy=False), b.astype(complex, copy=False))
 
 
 # --------------------------------------------------------------------------- diagram
@@ -113,10 +110,19 @@ class Diagram:
     criteria: StabilityCriteria = field(default_factory=StabilityCriteria)
     has_uncertainty: bool = True
     result_settings: dict = field(default_factory=dict)  #: ``Result.settings`` of the identification
+    #: The core's diagram these arrays are read from (set by :func:`stabilization_diagram`); what
+    #: :func:`modaluq.select_modes` clusters. ``None`` for a Diagram made otherwise (constructed,
+    #: copied or unpickled): make it again with :func:`stabilization_diagram` to select modes.
+    _core_diagram: object = field(default=None, init=False, repr=False, compare=False)
 
     @property
     def n_poles(self) -> int:
         return int(self.order.size)
+
+    def __getstate__(self):
+        state = dict(self.__dict__)  # the core's objects do not pickle
+        state.pop("_core_diagram", None)
+        return state
 
     def __len__(self) -> int:
         return self.n_poles
@@ -174,30 +180,8 @@ class Diagram:
 
         return diagram_to_xarray(self, selected, attrs)
 
-    def to_core(self):
-        """The core's Diagram (selection.hpp reads poles and statuses) from these arrays."""
-        p = _core.Poles()
-        p.order = np.asarray(self.order, np.int64)
-        p.frequency_hz = np.asarray(self.frequency_hz, float)
-        p.damping_ratio = np.asarray(self.damping_ratio, float)
-        p.frequency_std = np.asarray(self.frequency_std, float)
-        p.damping_std = np.asarray(self.damping_std, float)
-        p.mode_shape = np.asarray(self.mode_shape, complex)
-        p.mode_shape_std_real = np.asarray(self.mode_shape_std_real, float)
-        p.mode_shape_std_imag = np.asarray(self.mode_shape_std_imag, float)
-        p.close_singular_values = np.asarray(self.close_singular_values, bool)
-        p.noise_coupled = np.asarray(self.noise_coupled, bool)
-        p.orders = [int(n) for n in self.orders]
-        p.has_uncertainty = bool(self.has_uncertainty)
-        d = _core.Diagram()
-        d.poles = p
-        d.status = [CORE_OF_STATUS[s] for s in self.status]
-        return d
-
     def select_modes(self, settings=None, **kwargs):
         """Shorthand for :func:`modaluq.select_modes` (``kwargs``: fields of :class:`~modaluq.ClusteringSettings`)."""
-        from .selection import select_modes
-
         return select_modes(self, settings, **kwargs)
 
     def plot(self, ax=None, *, y=None, spectrum=None, selected=None, show_rejected=True, nperseg=None,
@@ -238,7 +222,9 @@ def stabilization_diagram(result, criteria: StabilityCriteria | None = None, *,
     Diagram
         Every pole with its :class:`PoleStatus` and, for the others than stable, the reason.
     """
-    if not isinstance(result, Result):
+    # a Result is known by its fields: results.py sits above this module (its Result.stabilization_diagram
+    # calls this function), and a module imports the types it makes, not those it takes
+    if not all(hasattr(result, k) for k in ("modes", "fs", "n_outputs", "settings")):
         raise TypeError(f"result must be a modaluq.Result (from modaluq.identify); got {type(result).__name__}")
     if criteria is None:
         criteria = StabilityCriteria(**kwargs)
@@ -254,38 +240,11 @@ def stabilization_diagram(result, criteria: StabilityCriteria | None = None, *,
         if len(names) != n_out:
             raise ValueError(f"output_names must have {n_out} entries (one per output); got {len(names)}")
     has_std = all(m.has_uncertainty for m in result.modes)
-
-    # Flatten the orders into the core's Poles; the judging is the core's (stabilization.hpp).
-    cols = {k: [] for k in ("order", "f", "xi", "sf", "sxi", "close", "coupled")}
-    shapes, shapes_sr, shapes_si = [], [], []
-    for m in result.modes:
-        n = m.n_modes
-        cols["order"].append(np.full(n, m.order, dtype=np.int64))
-        cols["f"].append(np.asarray(m.frequency_hz, float))
-        cols["xi"].append(np.asarray(m.damping_ratio, float))
-        nan = np.full(n, np.nan)
-        cols["sf"].append(np.asarray(m.frequency_std, float) if has_std else nan)
-        cols["sxi"].append(np.asarray(m.damping_std, float) if has_std else nan)
-        cols["close"].append(np.full(n, bool(m.close_singular_values)))
-        coupled = getattr(m, "noise_coupled", None)
-        cols["coupled"].append(np.zeros(n, bool) if coupled is None else np.asarray(coupled, bool).reshape(n))
-        shapes.append(np.asarray(m.mode_shape, complex).reshape(n_out, n))
-        nan2 = np.full((n_out, n), np.nan)
-        shapes_sr.append(np.asarray(m.mode_shape_std_real, float).reshape(n_out, n) if has_std else nan2)
-        shapes_si.append(np.asarray(m.mode_shape_std_imag, float).reshape(n_out, n) if has_std else nan2)
-    poles = _core.Poles()
-    poles.order = _concat(cols["order"], np.int64)
-    poles.frequency_hz = _concat(cols["f"])
-    poles.damping_ratio = _concat(cols["xi"])
-    poles.frequency_std = _concat(cols["sf"])
-    poles.damping_std = _concat(cols["sxi"])
-    poles.close_singular_values = _concat(cols["close"], bool)
-    poles.noise_coupled = _concat(cols["coupled"], bool)
-    poles.mode_shape = np.concatenate(shapes, axis=1) if shapes else np.zeros((n_out, 0), complex)
-    poles.mode_shape_std_real = np.concatenate(shapes_sr, axis=1) if shapes else np.zeros((n_out, 0))
-    poles.mode_shape_std_imag = np.concatenate(shapes_si, axis=1) if shapes else np.zeros((n_out, 0))
-    poles.orders = [int(m.order) for m in result.modes]
-    poles.has_uncertainty = bool(has_std)
+    ident = getattr(result, "_identification", None)  # the core's, kept by identify() (results.py)
+    poles = _core.poles_of(ident) if ident is not None else _poles_of_modes(result, has_std)
+    if poles.frequency_hz.size == 0:  # no pole: the shapes keep one row per channel all the same
+        poles.mode_shape = np.zeros((n_out, 0), complex)
+        poles.mode_shape_std_real = poles.mode_shape_std_imag = np.zeros((n_out, 0))
 
     core_criteria = criteria.to_core()
     # The band of interest given to identify (frequency_range): poles outside it are rejected.
@@ -297,7 +256,7 @@ def stabilization_diagram(result, criteria: StabilityCriteria | None = None, *,
     n_poles = int(p.frequency_hz.size)
     status = np.empty(n_poles, dtype=object)
     status[:] = [STATUS_OF_CORE[s] for s in d.status]
-    return Diagram(
+    diagram = Diagram(
         order=np.asarray(p.order, np.int64), frequency_hz=p.frequency_hz, damping_ratio=p.damping_ratio,
         frequency_std=p.frequency_std, damping_std=p.damping_std,
         mode_shape=p.mode_shape, mode_shape_std_real=p.mode_shape_std_real,
@@ -311,7 +270,40 @@ def stabilization_diagram(result, criteria: StabilityCriteria | None = None, *,
         fs=float(result.fs), output_names=names, criteria=criteria, has_uncertainty=has_std,
         result_settings=dict(result.settings),
     )
+    object.__setattr__(diagram, "_core_diagram", d)
+    return diagram
 
 
-def _concat(parts, dtype=float) -> np.ndarray:
-    return np.concatenate(parts).astype(dtype, copy=False) if parts else np.zeros(0, dtype)
+def _poles_of_modes(result, has_std: bool):
+    """The core's ``Poles`` of a Result that does not hold the core's identification (one made by
+    hand, copied or unpickled): its modes flattened as ``_core.poles_of`` flattens an
+    identification (``test_stabilization.py`` checks the two agree bit for bit)."""
+    modes = [m for m in result.modes if m.n_modes]
+    n_out = int(result.n_outputs)
+
+    def per_pole(values, dtype=float):  # one entry per pole
+        return np.concatenate([np.asarray(v, dtype).reshape(-1) for v in values]) if modes else np.zeros(0, dtype)
+
+    def per_column(values, dtype=float):  # one column per pole
+        return (np.concatenate([np.asarray(v, dtype).reshape(n_out, -1) for v in values], axis=1) if modes
+                else np.zeros((n_out, 0), dtype))
+
+    def std(name):  # NaN without uncertainty
+        return [getattr(m, name) if has_std else np.full(np.shape(m.mode_shape) if name.startswith("mode")
+                                                         else m.n_modes, np.nan) for m in modes]
+
+    p = _core.Poles()
+    p.order = per_pole([np.full(m.n_modes, m.order) for m in modes], np.int64)
+    p.frequency_hz = per_pole([m.frequency_hz for m in modes])
+    p.damping_ratio = per_pole([m.damping_ratio for m in modes])
+    p.frequency_std = per_pole(std("frequency_std"))
+    p.damping_std = per_pole(std("damping_std"))
+    p.mode_shape = per_column([m.mode_shape for m in modes], complex)
+    p.mode_shape_std_real = per_column(std("mode_shape_std_real"))
+    p.mode_shape_std_imag = per_column(std("mode_shape_std_imag"))
+    p.close_singular_values = per_pole([np.full(m.n_modes, m.close_singular_values) for m in modes], bool)
+    p.noise_coupled = per_pole([np.zeros(m.n_modes, bool) if m.noise_coupled is None else m.noise_coupled
+                                for m in modes], bool)
+    p.orders = [int(m.order) for m in result.modes]
+    p.has_uncertainty = bool(has_std)
+    return p

@@ -11,7 +11,20 @@ import math
 
 import numpy as np
 
-from modaluq import ClusteringSettings, Diagram, PoleStatus, SelectedModes, StabilityCriteria, modal_assurance_criterion
+from modaluq import ClusteringSettings, Diagram, PoleStatus, SelectedModes, StabilityCriteria
+
+
+def modal_assurance_criterion(shape_a, shape_b) -> np.ndarray:
+    """MAC in NumPy (modaluq's is the core's): |a_iᴴ b_j|² / ((a_iᴴ a_i)(b_jᴴ b_j)), 0 for a zero shape."""
+    a = np.asarray(shape_a)
+    b = np.asarray(shape_b)
+    a = a[:, None] if a.ndim == 1 else a
+    b = b[:, None] if b.ndim == 1 else b
+    cross = np.abs(a.conj().T @ b) ** 2
+    denom = np.outer(np.real(np.sum(a.conj() * a, axis=0)), np.real(np.sum(b.conj() * b, axis=0)))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        mac = np.where(denom > 0, cross / np.where(denom > 0, denom, 1.0), 0.0)
+    return np.clip(mac, 0.0, 1.0)
 
 
 def _pct(x: float) -> str:

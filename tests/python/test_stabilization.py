@@ -80,6 +80,71 @@ def test_mac_is_one_for_scaled_shapes_and_zero_for_orthogonal_ones():
 def test_mac_refuses_mismatched_shapes():
     with pytest.raises(ValueError, match="shape_a and shape_b"):
         modal_assurance_criterion(np.ones(3), np.ones(4))
+    with pytest.raises(ValueError, match="shape_a and shape_b"):
+        modal_assurance_criterion(np.ones((3, 2, 1)), np.ones(3))
+
+
+def test_mac_is_the_cores_and_equals_numpy_for_every_kind_of_input():
+    # the core computes it (stabilization.hpp); NumPy's products sum in another order: 1e-15 apart
+    from stabilization_oracle import modal_assurance_criterion as numpy_mac
+
+    rng = np.random.default_rng(3)
+    a = rng.standard_normal((5, 4)) + 1j * rng.standard_normal((5, 4))
+    b = rng.standard_normal((5, 3))
+    a[:, 2] = 0.0  # a zero shape has MAC 0 with everything
+    for x, y in [(a, b), (a, a), (b, a), (a[:, 0], b), (a, b[:, 1]), (b[:, 0], b[:, 1]), (a[:, :0], b),
+                 (list(a[:, 0]), a[:, 1].tolist()), (np.asfortranarray(a), b[::-1])]:
+        mac = modal_assurance_criterion(x, y)
+        assert mac.dtype == np.float64 and mac.shape == numpy_mac(x, y).shape
+        np.testing.assert_allclose(mac, numpy_mac(x, y), rtol=0, atol=1e-14)
+    assert not modal_assurance_criterion(a, b)[2].any()
+    # single precision is computed in double (NumPy's products stayed in single precision)
+    b32 = b.astype(np.float32)
+    assert np.array_equal(modal_assurance_criterion(a, b32), modal_assurance_criterion(a, b32.astype(float)))
+
+
+@pytest.mark.filterwarnings("ignore::modaluq.ModalUQWarning")
+def test_diagram_is_the_cores_and_a_result_without_it_gives_the_same_numbers():
+    # identify() keeps the core's identification and the diagram comes from _core.poles_of; a
+    # Result made otherwise (here a copy) flattens its modes: the same diagram and modes, bit for bit
+    import dataclasses
+    import pickle
+
+    sim = modaluq.simulate(20_000, seed=1)
+    for u, extra in ((None, {}), (sim.u, {}), (None, {"uncertainty": False}), (sim.u, {"frequency_range": (1, 16)})):
+        result = modaluq.identify(sim.y, u, fs=sim.fs, block_rows=15, orders=range(2, 31, 2), **extra)
+        assert result._identification is not None
+        copies = [dataclasses.replace(result), pickle.loads(pickle.dumps(result))]
+        assert all(c._identification is None for c in copies)
+        diagram = result.stabilization_diagram()
+        for copy in copies:
+            other = copy.stabilization_diagram()
+            for name in [f.name for f in dataclasses.fields(Diagram) if f.init]:
+                x, y = getattr(diagram, name), getattr(other, name)
+                if isinstance(x, np.ndarray):
+                    assert x.dtype == y.dtype and x.shape == y.shape, name
+                    assert np.array_equal(x, y, equal_nan=x.dtype.kind in "fc"), name
+                else:
+                    assert x == y, name
+            assert str(copy.select_modes()) == str(result.select_modes())
+
+
+def test_select_modes_needs_the_diagram_stabilization_diagram_made():
+    import dataclasses
+    import pickle
+
+    diagram = stabilization_diagram(make_result({4: [pole(5.0)], 6: [pole(5.0)], 8: [pole(5.0)]}))
+    assert diagram.select_modes(min_cluster_size=2).n_modes == 1
+    for copy in (pickle.loads(pickle.dumps(diagram)), dataclasses.replace(diagram)):
+        np.testing.assert_array_equal(copy.frequency_hz, diagram.frequency_hz)
+        with pytest.raises(TypeError, match="make it again with stabilization_diagram"):
+            copy.select_modes()
+
+
+def test_a_diagram_without_poles_keeps_its_channels():
+    d = stabilization_diagram(make_result({2: [], 4: []}))
+    assert d.n_poles == 0 and d.mode_shape.shape == (3, 0) and d.n_outputs == 3
+    assert d.select_modes().n_modes == 0
 
 
 # --------------------------------------------------------------------------- per-pole criteria
