@@ -34,15 +34,13 @@ import collections
 import re
 import sys
 import warnings
+from pathlib import Path
 
 import numpy as np
 from scipy import signal
 
 import modaluq
 from modaluq.stabilization import modal_assurance_criterion as mac
-
-warnings.simplefilter("ignore")
-D = (sys.argv[1].rstrip("/") if len(sys.argv) > 1 else "../shared/data") + "/"
 
 # pattern: (deck template = spatial filter {station: weight}, ground input of its H1 {station: weight})
 RECORDS = {
@@ -91,8 +89,8 @@ def station(name):
     return str(name).split("|")[0]
 
 
-def runs_of(rec, d):
-    """(label, excitation, kind, channels, identify kwargs) of every run."""
+def runs_of(rec, d, kinds=None):
+    """(label, excitation, kind, channels, identify kwargs) of every run (of ``kinds``, default all)."""
     names = [str(n) for n in d["channel_names"]]
     fs, band = float(d["fs"]), rec["band"]
     y, u = d["y"], d["u"]
@@ -119,6 +117,8 @@ def runs_of(rec, d):
         for direction in ("Tran", "Up"):
             cols = [i for i, n in enumerate(names) if f"|{direction}|" in n]
             out.append((f"{direction} only {ex}", ex, f"view-{direction}", cols, dict(y=y[:, cols], u=uu)))
+    if kinds is not None:
+        out = [run for run in out if run[2] in kinds]
     return out, p0, pw
 
 
@@ -195,10 +195,10 @@ def ground_peaks(rec, d):
     return f[m][k]
 
 
-def identify_all(rec, d, templates):
+def identify_all(rec, d, templates, kinds=None):
     names = [str(n) for n in d["channel_names"]]
     fs = float(d["fs"])
-    runs, p0, pw = runs_of(rec, d)
+    runs, p0, pw = runs_of(rec, d, kinds)
     modes, results = [], {}
     for run_label, ex, kind, cols, kw in runs:
         kw = dict(kw)
@@ -280,15 +280,15 @@ def match_mixed(t, modes, run_label, ex):
     return m
 
 
-def study(title, rec):
-    d = np.load(D + rec["file"])
+def study(title, rec, data_dir, kinds=None):
+    d = np.load(Path(data_dir) / rec["file"])
     fs = float(d["fs"])
     names = [str(n) for n in d["channel_names"]]
     sta = [station(n) for n in names]
     in_sta = [station(n) for n in d["input_names"]]
     templates = {k: np.array([v[0].get(s, 0.0) for s in sta], float) for k, v in rec["patterns"].items()}
     inputs = {k: np.array([v[1].get(s, 0.0) for s in in_sta], float) for k, v in rec["patterns"].items()}
-    runs, modes, results, p0, pw = identify_all(rec, d, templates)
+    runs, modes, results, p0, pw = identify_all(rec, d, templates, kinds)
     spec = spectra(rec, d, templates, inputs)
     gpk = ground_peaks(rec, d)
     band = rec["band"]
@@ -414,6 +414,15 @@ def study(title, rec):
     return targets, results
 
 
+def main(data_dir="../shared/data", records=tuple(RECORDS), kinds=None):
+    """Print the study of each of ``records`` (names of :data:`RECORDS`); return {name: (targets, results)}.
+
+    ``kinds`` limits the runs (default all: "default", "window", "half1", "half2", "p0.75", "p1.5",
+    "view-Tran", "view-Up"); the verdicts need them all."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return {title: study(title, RECORDS[title], data_dir, kinds) for title in records}
+
+
 if __name__ == "__main__":
-    for title, rec in RECORDS.items():
-        study(title, rec)
+    main(*sys.argv[1:2])

@@ -1,4 +1,7 @@
-"""Fill doc_template.md with the generated tables -> docs/validation-high-orders.md (run from this folder)."""
+"""Fill doc_template.md with the generated tables -> docs/validation-high-orders.md.
+
+usage: python3 build_doc.py [OUT.md]   (in the folder of the runs' npz files)"""
+import os
 import re
 import subprocess
 import sys
@@ -7,7 +10,9 @@ from pathlib import Path
 HERE = Path(__file__).resolve().parent
 
 def run(*args):
-    return subprocess.run([sys.executable, *args], capture_output=True, text=True, check=True, cwd=HERE).stdout
+    script, *rest = args
+    return subprocess.run([sys.executable, str(HERE / script), *rest], capture_output=True, text=True, check=True,
+                          cwd=os.getcwd()).stdout
 
 def clean(t):
     return "\n".join(l for l in t.strip("\n").splitlines() if not l.startswith("<!-- section")).strip("\n")
@@ -25,5 +30,6 @@ for line in fc.split("\n2b.")[0].split("\n2.")[1].splitlines()[1:]:
 t = t.replace("{{xiclean}}", "\n".join(rows))
 t = t.replace("{{flagcheck}}", "```text\n" + run("flagcheck.py", "mc5_300.npz", "w1.5").strip() + "\n```")
 assert "{{" not in t
-open(HERE.parents[1] / "docs" / "validation-high-orders.md", "w").write(t)
+out = Path(sys.argv[1]) if len(sys.argv) > 1 else HERE.parents[1] / "docs" / "validation-high-orders.md"
+out.write_text(t)
 print("written", len(t))

@@ -1,5 +1,7 @@
 """Spurious (unmatched) poles above the true order: share flagged noise_coupled and share with
-sigma_f/f > 2 % for rho_max = 5, 10, 20 (40 records, paper case).  docs/validation.md, issue 11."""
+sigma_f/f > 2 % for rho_max = 5, 10, 20 (40 records, paper case).
+usage: python3 flag_spurious.py [N_RECORDS]  docs/validation.md, issue 11."""
+import sys
 import warnings
 
 import numpy as np
@@ -10,7 +12,7 @@ from modaluq.validation import match_modes
 warnings.simplefilter("ignore")
 ORD=[18,24,36]
 acc={}
-for k in range(40):
+for k in range(int(sys.argv[1]) if len(sys.argv) > 1 else 40):
     sim=modaluq.simulate(10_000, seed=np.random.SeedSequence(0, spawn_key=(k,)))
     for m,u in enumerate((None,sim.u)):
         rf=modaluq.identify(sim.y,u,fs=sim.fs,block_rows=15,orders=ORD,noise_coupling_limit=1e300)

@@ -1,5 +1,6 @@
 """sigma of the spurious (unmatched) poles with and without the fix (and the fix with the flag rule: sigma_base when
-sigma_base/sigma_fix > 5 for f or xi), order 24/36, 30 records. usage: OPENBLAS_NUM_THREADS=1 python3 spurious.py"""
+sigma_base/sigma_fix > 5 for f or xi), order 24/36, 30 records. usage: OPENBLAS_NUM_THREADS=1 python3 spurious.py [N_RECORDS]"""
+import sys
 import warnings
 
 import numpy as np
@@ -10,7 +11,7 @@ from modaluq.validation.montecarlo import match_modes
 
 warnings.simplefilter("ignore")
 rows = []
-for k in range(30):
+for k in range(int(sys.argv[1]) if len(sys.argv) > 1 else 30):
     sim = modaluq.simulate(10_000, seed=np.random.SeedSequence(0, spawn_key=(k,)))
     for c, u in enumerate((None, sim.u)):
         H, dH = covariances(sim.y, u, 15, 15, 50)

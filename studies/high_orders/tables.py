@@ -1,6 +1,6 @@
 """Markdown tables of docs/validation-high-orders.md from the saved runs.
 
-usage: python3 tables.py [section ...]   sections: base decomp fix xi flag boot hcov (default all)
+usage: python3 tables.py [section ...]   (in the folder of the runs' npz files)   sections: base decomp fix xi flag boot hcov (default all)
 needs mc2_300.npz, mc5_300.npz (or mc4_300.npz), boot150.npz, hcov_io0.npz, hcov_io.npz, nbscan.npz
 """
 import os
@@ -8,7 +8,7 @@ import sys
 
 import numpy as np
 
-HERE = os.path.dirname(os.path.abspath(__file__))
+HERE = os.getcwd()  # the runs write their npz files into the folder they run in
 
 
 def load(name):

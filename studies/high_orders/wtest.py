@@ -1,3 +1,6 @@
+"""Weyl ratios s_k / delta_k of the first 16 singular values (40 records).
+usage: python3 wtest.py [N_RECORDS]"""
+import sys
 import warnings
 
 import numpy as np
@@ -8,7 +11,7 @@ import modaluq
 warnings.simplefilter("ignore")
 np.set_printoptions(precision=2, suppress=True, linewidth=200)
 rows = {0: [], 1: [], 2: []}
-for k in range(40):
+for k in range(int(sys.argv[1]) if len(sys.argv) > 1 else 40):
     seed = np.random.SeedSequence(0, spawn_key=(k,))
     sim = modaluq.simulate(10_000, seed=seed)
     sim0 = modaluq.simulate(10_000, seed=seed, unknown_input_std=0.0)
