@@ -22,7 +22,7 @@ LAYERS = {
     "modaluq.checks": 1,
     # settings and the signal helpers they are applied with; the side leaves (files, simulator)
     "modaluq.settings": 2, "modaluq.preprocess": 2, "modaluq.auto_settings": 2, "modaluq.spectrum": 2,
-    "modaluq.harmonics": 2, "modaluq.provenance": 2, "modaluq.simulate": 2, "modaluq.io.*": 2,
+    "modaluq.harmonics": 2, "modaluq.provenance": 2, "modaluq.simulate.*": 2, "modaluq.io.*": 2,
     "modaluq.monitoring_simulator": 2,
     "modaluq.results": 3,
     "modaluq.identification": 4, "modaluq.streaming": 4,
