@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..checks import check_boolean
+from ..jsonvalues import dumps
 from .paper import METHOD_LABELS, METHODS
 
 __all__ = ["MonteCarloResult"]
@@ -311,7 +312,7 @@ class MonteCarloResult:
         """Save the run to a ``.npz`` file (arrays plus the settings as JSON); see :meth:`load`."""
         meta = {"settings": self.settings, "elapsed_s": self.elapsed_s, "processes": self.processes,
                 "machine": self.machine, "n_bootstrap": self.n_bootstrap, "methods": list(METHODS)}
-        np.savez_compressed(path, meta=np.array(json.dumps(meta)),
+        np.savez_compressed(path, meta=np.array(dumps(meta)),
                             **{name: getattr(self, name) for name in _ARRAY_FIELDS})
 
     @classmethod
