@@ -9,7 +9,8 @@ and the core's block estimate of var<g_m, H> is var over blocks of the block mea
 We compare, over records, the mean block estimate (n_b = 25, 50, 100, 200) with the Monte Carlo
 variance of <g_m, H>, and average the autocovariance of z_c over records.
 
-usage: OPENBLAS_NUM_THREADS=1 nice -n 10 python3 hcov.py N_RECORDS OUT.npz [unknown_input_std]
+usage: OPENBLAS_NUM_THREADS=1 nice -n 10 python3 hcov.py N_RECORDS OUT.npz [unknown_input_std] [REFERENCE_SAMPLES]
+(the reference record: 400_000 samples by default)
 """
 import sys
 import time
@@ -30,8 +31,9 @@ def main():
     n_rec = int(sys.argv[1])
     out = sys.argv[2]
     uis = float(sys.argv[3]) if len(sys.argv) > 3 else 0.0
+    n_ref = int(sys.argv[4]) if len(sys.argv) > 4 else 400_000
     t0 = time.process_time()
-    ref = modaluq.simulate(400_000, seed=987654, unknown_input_std=uis)
+    ref = modaluq.simulate(n_ref, seed=987654, unknown_input_std=uis)
     Href, dHref = covariances(ref.y, ref.u, P, P, 50)
     rec = Record(Href, dHref, 3, ref.fs)
     md = rec.order(12)
