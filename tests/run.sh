@@ -34,7 +34,7 @@ cmake --build build/example -j"$JOBS"
 build/example/identify_stream
 
 echo "== Python: ruff (lint) and pytest (tests and the package's docstring examples, warnings as errors)"
-"$PY" -m ruff check python tests bench
+"$PY" -m ruff check python tests bench studies
 "$PY" -m pytest -q --doctest-modules --pyargs modaluq tests/python
 
 echo "== loaders: short fuzz run (the long run: docs/reliability.md)"

@@ -26,11 +26,12 @@ import numpy as np
 
 from . import horizons
 from .auto_settings import choose_settings
-from .checks import as_samples, check_boolean, check_sampling_frequency
+from .checks import as_samples, check_boolean, check_instance, check_sampling_frequency
 from .harmonics import harmonic_kurtosis, possible_harmonics
 from .horizons import HorizonCheck
 from .identification import identify_quietly
 from .io import Recording, load
+from .jsonvalues import finite_or_none, jsonable
 from .preprocess import Preprocessed, preprocess
 from .provenance import provenance
 from .results import ModalUQWarning, Result
@@ -155,9 +156,9 @@ class Analysis:
         in_names = _names(input_names, 0 if u is None else u.shape[1], "u", "input_names")
         refs = None if references is None else tuple(resolve_channels(references, out_names, "references"))
         return cls(y=y, u=u, fs=fs, output_names=out_names, input_names=in_names, references=refs,
-                   settings=_typed(settings, Settings, "settings"),
-                   criteria=_typed(criteria, StabilityCriteria, "criteria"),
-                   clustering=_typed(clustering, ClusteringSettings, "clustering"))
+                   settings=check_instance("settings", settings, Settings),
+                   criteria=check_instance("criteria", criteria, StabilityCriteria),
+                   clustering=check_instance("clustering", clustering, ClusteringSettings))
 
     @classmethod
     def from_file(cls, path, *, fs: float | None = None, format: str | None = None, read_options: dict | None = None,
@@ -313,9 +314,9 @@ class Analysis:
             h = self.horizons
             out["horizon_check"] = {
                 "block_rows": list(h.block_rows),
-                "modes": [{"mode": i + 1, "frequency_hz": _finite_list(h.frequency_hz[i]),
-                           "damping_ratio": _finite_list(h.damping_ratio[i]),
-                           "frequency_spread": _finite(h.frequency_spread[i])} for i in range(sel.n_modes)]}
+                "modes": [{"mode": i + 1, "frequency_hz": jsonable(h.frequency_hz[i]),
+                           "damping_ratio": jsonable(h.damping_ratio[i]),
+                           "frequency_spread": finite_or_none(h.frequency_spread[i])} for i in range(sel.n_modes)]}
         return out
 
     def describe_run(self) -> str:
@@ -396,19 +397,3 @@ def _names(names, n: int, prefix: str, parameter: str) -> tuple:
     if len(names) != n:
         raise ValueError(f"{parameter} must have {n} entries; got {len(names)}")
     return names
-
-
-def _typed(value, cls, parameter: str):
-    if value is None:
-        return cls()
-    if not isinstance(value, cls):
-        raise TypeError(f"{parameter} must be a modaluq.{cls.__name__}; got {type(value).__name__}")
-    return value
-
-
-def _finite(x):
-    return float(x) if np.isfinite(x) else None
-
-
-def _finite_list(values) -> list:
-    return [_finite(v) for v in values]

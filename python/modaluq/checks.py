@@ -74,6 +74,21 @@ def check_boolean(name, value) -> bool:
     return bool(value)
 
 
+def check_instance(name, value, cls):
+    """``value`` if it is a ``cls``; a ``cls()`` (its defaults) for ``None``; else ``TypeError``.
+
+    For the settings objects an analysis takes (``settings=``, ``criteria=``, ``clustering=``):
+    a dict or a keyword's value in their place is refused by name, not half-used.
+    """
+    if value is None:
+        return cls()
+    if not isinstance(value, cls):
+        # named as users import it: modaluq.Settings, not modaluq.settings.Settings
+        raise TypeError(f"{name} must be a {cls.__module__.partition('.')[0]}.{cls.__name__}; "
+                        f"got {type(value).__name__}")
+    return value
+
+
 def check_integer(name, value, *, minimum=None, maximum=MAX_COUNT):
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Integral):
         raise TypeError(f"{name} must be an integer; got {value!r}")

@@ -19,15 +19,14 @@ Every conversion of a result to a file format lives here (``Diagram.to_xarray`` 
 
 from __future__ import annotations
 
-import json
-import math
 import os
 from pathlib import Path
 
 import numpy as np
 
 from .checks import require
-from .provenance import file_sha256, jsonable, provenance
+from .jsonvalues import dumps, finite_or_none, jsonable
+from .provenance import file_sha256, provenance
 from .settings import PoleStatus
 
 __all__ = ["EXTENSIONS", "diagram_to_xarray", "file_sha256", "provenance", "report", "selected_modes_to_dict",
@@ -39,10 +38,7 @@ EXTENSIONS = {".json": "json", ".csv": "csv", ".nc": "netcdf", ".nc4": "netcdf"}
 
 def selected_modes_to_dict(selected) -> dict:
     """:class:`~modaluq.SelectedModes` as plain Python (JSON-ready): one dict per mode, shapes per channel."""
-    def num(x):
-        x = float(x)
-        return x if math.isfinite(x) else None
-
+    num = finite_or_none
     modes = []
     for i in range(selected.n_modes):
         shape = {}
@@ -126,12 +122,12 @@ def diagram_to_xarray(diagram, selected=None, attrs: dict | None = None):
             pole_vars[f"selected_{name}"] = (("channel", "mode"), values, {})
         coords["mode"] = np.arange(1, sel.n_modes + 1)  # numbered from 1, as in every table and plot
     ds = xr.Dataset({k: xr.Variable(d, v, a) for k, (d, v, a) in pole_vars.items()}, coords=coords)
-    gattrs = {"fs_hz": diagram.fs, "criteria": json.dumps(diagram.criteria.to_dict()),
-              "identification_settings": json.dumps(diagram.result_settings, default=str)}
+    gattrs = {"fs_hz": diagram.fs, "criteria": dumps(diagram.criteria.to_dict()),
+              "identification_settings": dumps(diagram.result_settings)}
     if selected is not None:
-        gattrs["clustering"] = json.dumps(selected.settings.to_dict())
+        gattrs["clustering"] = dumps(selected.settings.to_dict())
     for k, v in (attrs or {}).items():
-        gattrs[k] = v if isinstance(v, (str, int, float)) else json.dumps(v, default=str)
+        gattrs[k] = v if isinstance(v, (str, int, float)) else dumps(v)
     ds.attrs.update(gattrs)
     return ds
 
@@ -166,7 +162,7 @@ def report(diagram, selected, *, stamp: dict | None = None, extra: dict | None =
 def write_json(path, diagram, selected, *, stamp: dict | None = None, extra: dict | None = None) -> Path:
     """Write :func:`report` to ``path`` as indented UTF-8 JSON; return the path."""
     path = Path(path)
-    text = json.dumps(report(diagram, selected, stamp=stamp, extra=extra), indent=2, allow_nan=False)
+    text = dumps(report(diagram, selected, stamp=stamp, extra=extra), indent=2)
     path.write_text(text + "\n", encoding="utf-8")
     return path
 
@@ -182,7 +178,7 @@ def write_netcdf(path, diagram, selected=None, *, stamp: dict | None = None) -> 
     """Write the full diagram (every pole, status, reason, σ) and the selected modes to NetCDF-4."""
     require("netCDF4", "writing NetCDF")  # xarray's own message would name an "engine", not the package
     path = Path(path)
-    ds = diagram.to_xarray(selected, attrs={"stamp": json.dumps(jsonable(stamp or provenance()))})
+    ds = diagram.to_xarray(selected, attrs={"stamp": dumps(stamp or provenance())})
     ds.to_netcdf(path, engine="netcdf4")
     return path
 

@@ -1,19 +1,20 @@
 """Provenance: what produced a result (modaluq version, settings, the input file's checksum, time).
 
-Every report (JSON, NetCDF) carries one stamp; :func:`jsonable` turns NumPy values, enums and
-paths into plain JSON values for it.
+Every report (JSON, NetCDF) carries one stamp; :func:`jsonable` (from :mod:`modaluq.jsonvalues`,
+re-exported here) turns NumPy values, enums and paths into plain JSON values for it, a
+non-finite number into ``null``.
 """
 
 from __future__ import annotations
 
 import datetime
 import hashlib
-import os
 import platform
 from pathlib import Path
 
 import numpy as np
 
+from .jsonvalues import jsonable
 from .version import __version__
 
 __all__ = ["file_sha256", "jsonable", "provenance"]
@@ -26,30 +27,6 @@ def file_sha256(path, chunk_bytes: int = 1 << 20) -> str:
         for block in iter(lambda: fh.read(chunk_bytes), b""):
             h.update(block)
     return h.hexdigest()
-
-
-def jsonable(x):
-    """Convert NumPy scalars/arrays, enums, paths and non-finite floats into JSON values."""
-    if isinstance(x, dict):
-        return {str(k): jsonable(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [jsonable(v) for v in x]
-    if isinstance(x, np.ndarray):
-        return jsonable(x.tolist())
-    if isinstance(x, (np.bool_, bool)):
-        return bool(x)
-    if isinstance(x, (np.integer, int)):
-        return int(x)
-    if isinstance(x, (np.floating, float)):
-        x = float(x)
-        return x if np.isfinite(x) else None
-    if isinstance(x, os.PathLike):
-        return os.fspath(x)
-    if x is None or isinstance(x, str):
-        return x
-    if hasattr(x, "value"):  # enum
-        return jsonable(x.value)
-    return str(x)
 
 
 def provenance(source=None, *, settings: dict | None = None) -> dict:

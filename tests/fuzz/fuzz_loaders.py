@@ -38,9 +38,8 @@ FORMATS = {
     "csv": (".csv", {}), "npy": (".npy", {"fs": FS}), "npz": (".npz", {}), "mat5": (".mat", {}),
     "mat73": (".mat", {}), "hdf5": (".h5", {}), "uff": (".uff", {}), "tdms": (".tdms", {}),
 }
-#: fuzz format -> modaluq.io format name (which reader module to instrument)
-FORMATS_READER = {"csv": "csv", "npy": "numpy", "npz": "numpy", "mat5": "matlab",
-                  "mat73": "matlab", "hdf5": "hdf5", "uff": "uff", "tdms": "tdms"}
+# the reader of each is modaluq.io's for its extension (modaluq.io.FILE_FORMATS; a test checks
+# that every format there has a seed here)
 _INTERESTING = (0, 1, 0x7F, 0x80, 0xFF, 0x7FFF, 0xFFFF, 0x7FFFFFFF, 0xFFFFFFFF, 2**63 - 1,
                 2**64 - 1, 4096, 65536)
 
@@ -368,7 +367,7 @@ def fuzz_atheris(fmt: str, *, seconds, runs, seed, hang, save_dir) -> None:
     with atheris.instrument_imports(include=["modaluq.io", "nptdms", "pyuff"]):
         import modaluq.io as mio
 
-        importlib.import_module(f"modaluq.io.{mio.FORMATS[FORMATS_READER[fmt]][0]}")
+        importlib.import_module(f"modaluq.io.{mio.FORMATS[mio.SUPPORTED_EXTENSIONS[FORMATS[fmt][0]]][0]}")
         for lib in ("nptdms", "pyuff"):
             try:
                 importlib.import_module(lib)

@@ -19,10 +19,10 @@ PACKAGE = pathlib.Path(__file__).resolve().parents[2] / "python" / "modaluq"
 #: subpackage. A module may import modules of its own layer or below; never above.
 LAYERS = {
     "modaluq._core": 0, "modaluq._blas": 0, "modaluq.version": 0,
-    "modaluq.checks": 1,
+    "modaluq.checks": 1, "modaluq.jsonvalues": 1,
     # settings and the signal helpers they are applied with; the side leaves (files, simulator)
     "modaluq.settings": 2, "modaluq.preprocess": 2, "modaluq.auto_settings": 2, "modaluq.spectrum": 2,
-    "modaluq.harmonics": 2, "modaluq.provenance": 2, "modaluq.simulate": 2, "modaluq.io.*": 2,
+    "modaluq.harmonics": 2, "modaluq.provenance": 2, "modaluq.simulate.*": 2, "modaluq.io.*": 2,
     "modaluq.monitoring.simulator": 2,  # the monitoring wing's campaign simulator: a side leaf
     # The result types sit above what their convenience methods reach (Result.plot() ->
     # Diagram.select_modes() -> SelectedModes.to_dict()): a module imports the types it makes and

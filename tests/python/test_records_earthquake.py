@@ -3,7 +3,7 @@ engineer's call, ``modaluq.identify(y, u, fs=fs, frequency_range=band).select_mo
 and with the ground channels as inputs, within 2 % and with the expected deck pattern; and the
 call selects nothing wildly spurious.
 
-"Shown physical" and the expected frequencies come from tests/studies/earthquake_records.py
+"Shown physical" and the expected frequencies come from studies/earthquake_records.py
 (docs/settings.md, "Earthquake records"): found output-only and with the ground input, in both
 halves of the record and at a second horizon, with a clear deck pattern, ξ < 10 % and a peak of
 the pattern's spatially filtered spectrum or H1. A mode's frequency differs between the two

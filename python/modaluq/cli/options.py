@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 
+from ..io import FORMATS
 from ..settings import ClusteringSettings, Settings, StabilityCriteria
 from .common import integer_option, option_error, real_option
 
@@ -37,7 +38,7 @@ def add_analysis_options(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("data")
     g.add_argument("--fs", type=float, default=None, metavar="HZ",
                    help="sampling frequency in Hz (default: from the file, e.g. its time column)")
-    g.add_argument("--format", default=None, choices=["csv", "numpy", "matlab", "hdf5", "uff", "tdms"],
+    g.add_argument("--format", default=None, choices=list(FORMATS),
                    help="file format (default: from the extension)")
     g.add_argument("--read-option", action="append", metavar="KEY=VALUE", default=None,
                    help="option of the file reader, e.g. dataset=/daq/acc (HDF5), variable=acc (MATLAB), "

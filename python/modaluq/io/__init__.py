@@ -12,13 +12,14 @@ from __future__ import annotations
 
 import importlib
 import os
+from dataclasses import dataclass
 from pathlib import Path
 
 from .errors import RecordingFileError
 from .recording import Recording
 
-__all__ = ["Recording", "RecordingFileError", "load", "SUPPORTED_EXTENSIONS", "FORMATS",
-           "PARSE_TIMEOUT",
+__all__ = ["Recording", "RecordingFileError", "load", "FileFormat", "FILE_FORMATS", "SUPPORTED_EXTENSIONS",
+           "FORMATS", "PARSE_TIMEOUT",
            "read_csv", "read_numpy", "read_npy", "read_npz", "read_matlab", "read_hdf5",
            "read_uff", "read_tdms", "from_sep005", "to_sep005"]
 
@@ -27,31 +28,41 @@ __all__ = ["Recording", "RecordingFileError", "load", "SUPPORTED_EXTENSIONS", "F
 #: killed and a RecordingFileError says so. See docs/reliability.md.
 PARSE_TIMEOUT = 60.0
 
+
+@dataclass(frozen=True)
+class FileFormat:
+    """A file format :func:`load` reads: its ``format=`` name, the module and reader function
+    (``modaluq.io.<module>.<reader>``), the file extensions (lower case) and what it needs
+    beyond numpy."""
+
+    name: str
+    module: str
+    reader: str
+    extensions: tuple
+    requires: str = ""
+
+
+#: Every file format, in the order the docs list them: the one list that ``load``, the CLI's
+#: ``--format`` choices, docs/loaders.md's table (a test compares them) and the loader fuzzer
+#: read. A new format is a module with its reader and one entry here (docs/architecture.md).
+FILE_FORMATS = (
+    FileFormat("csv", "csv", "read_csv", (".csv", ".tsv", ".txt")),
+    FileFormat("numpy", "numpy_", "read_numpy", (".npy", ".npz")),
+    FileFormat("matlab", "matlab", "read_matlab", (".mat",), "scipy; h5py for v7.3"),
+    FileFormat("hdf5", "hdf5", "read_hdf5", (".h5", ".hdf5", ".hdf", ".he5"), "h5py"),
+    FileFormat("uff", "uff", "read_uff", (".uff", ".unv"), "pyuff"),
+    FileFormat("tdms", "tdms", "read_tdms", (".tdms",), "npTDMS"),
+)
+
 #: format name -> (module, reader function)
-FORMATS = {
-    "csv": ("csv", "read_csv"),
-    "numpy": ("numpy_", "read_numpy"),
-    "matlab": ("matlab", "read_matlab"),
-    "hdf5": ("hdf5", "read_hdf5"),
-    "uff": ("uff", "read_uff"),
-    "tdms": ("tdms", "read_tdms"),
-}
+FORMATS = {f.name: (f.module, f.reader) for f in FILE_FORMATS}
 
 #: file extension (lower case) -> format name
-SUPPORTED_EXTENSIONS = {
-    ".csv": "csv", ".tsv": "csv", ".txt": "csv",
-    ".npy": "numpy", ".npz": "numpy",
-    ".mat": "matlab",
-    ".h5": "hdf5", ".hdf5": "hdf5", ".hdf": "hdf5", ".he5": "hdf5",
-    ".uff": "uff", ".unv": "uff",
-    ".tdms": "tdms",
-}
+SUPPORTED_EXTENSIONS = {ext: f.name for f in FILE_FORMATS for ext in f.extensions}
 
-_LAZY = {
-    "read_csv": "csv", "read_numpy": "numpy_", "read_npy": "numpy_", "read_npz": "numpy_",
-    "read_matlab": "matlab", "read_hdf5": "hdf5", "read_uff": "uff", "read_tdms": "tdms",
-    "from_sep005": "sep005", "to_sep005": "sep005",
-}
+# reader name -> module, imported on first use
+_LAZY = {**{f.reader: f.module for f in FILE_FORMATS},
+         "read_npy": "numpy_", "read_npz": "numpy_", "from_sep005": "sep005", "to_sep005": "sep005"}
 
 
 def __getattr__(name):  # PEP 562: import format modules on first use
@@ -76,8 +87,8 @@ def load(path, *, fs=None, inputs=None, format=None, **format_options) -> Record
     inputs : list of str/int, optional
         Channels that are known inputs, by name or index; the others are outputs.
     format : str, optional
-        Force a reader ('csv', 'numpy', 'matlab', 'hdf5', 'uff', 'tdms') regardless of the
-        extension.
+        Force a reader (a name of :data:`FILE_FORMATS`: 'csv', 'numpy', 'matlab', 'hdf5',
+        'uff', 'tdms') regardless of the extension.
     **format_options
         Passed to the reader (e.g. ``dataset=`` for HDF5, ``variable=`` for MATLAB,
         ``group=`` for TDMS, ``time_column=`` for CSV).

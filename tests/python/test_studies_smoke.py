@@ -1,0 +1,142 @@
+"""The studies of ``studies/`` still run with the package's API: each on a tiny configuration.
+
+They print the tables that the docs quote (studies/README.md); here only that they run to the
+end (a renamed function or argument breaks them), not their numbers. The shared records are
+read from ``../shared/data`` beside the repository (or ``$MODALUQ_SHARED_DATA``); the runs that
+need them are skipped without.
+"""
+
+import importlib.util
+import os
+import pathlib
+import runpy
+import shutil
+import sys
+import warnings
+
+import numpy as np
+import pytest
+
+ROOT = pathlib.Path(__file__).resolve().parents[2]
+STUDIES = ROOT / "studies"
+HIGH_ORDERS = STUDIES / "high_orders"
+DATA = pathlib.Path(os.environ.get("MODALUQ_SHARED_DATA", ROOT.parent / "shared" / "data"))
+needs_data = pytest.mark.skipif(not (DATA / "cesmd_meloland_overpass_2016.npz").exists(),
+                                reason=f"the shared records are not in {DATA}")
+
+
+def _module(name):
+    spec = importlib.util.spec_from_file_location(f"studies_{name}", STUDIES / f"{name}.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def _script(monkeypatch, name, *args):
+    """Run ``studies/high_orders/<name>`` as ``python <name> args...`` in this process."""
+    monkeypatch.setattr(sys, "argv", [name, *map(str, args)])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the scripts' statistics of 2 records are NaN here and there
+        runpy.run_path(str(HIGH_ORDERS / name), run_name="__main__")
+
+
+def test_every_study_is_smoke_tested():
+    scripts = {p.name for p in HIGH_ORDERS.glob("*.py")} | {p.name for p in STUDIES.glob("*.py")}
+    tested = set(HIGH_ORDER_RUNS) | {"prop.py", "earthquake_records.py", "settings_records.py", "selected_sigma_mc.py"}
+    assert scripts == tested
+
+
+@pytest.mark.slow
+def test_selected_sigma_mc(capsys):
+    out = _module("selected_sigma_mc").main(n_records=2, duration=40.0)
+    assert set(out) == {"input/output", "output-only"}
+    assert out["output-only"].shape == (2, 6, 4)
+    assert "| mode | f (Hz) | found |" in capsys.readouterr().out
+
+
+def test_settings_records_without_data(capsys, tmp_path):
+    study = _module("settings_records")
+    with pytest.raises(ValueError, match="record 'nothing'"):
+        study.main(tmp_path, records=["nothing"])
+    assert "| record | decimation |" in capsys.readouterr().out
+
+
+@needs_data
+@pytest.mark.slow
+def test_settings_records(capsys):
+    _module("settings_records").main(DATA, records=("koma", "slab"))
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[2].startswith("| koma frame") and lines[3].startswith("| slab")
+
+
+@needs_data
+@pytest.mark.slow
+def test_earthquake_records(capsys):
+    out = _module("earthquake_records").main(DATA, records=("Meloland",), kinds=("default",))
+    targets, results = out["Meloland"]
+    assert {t["verdict"] for t in targets} <= {"physical", "probable", "not shown", "not found"}
+    assert set(results) == {"default OO", "default IO"}
+    assert "Meloland" in capsys.readouterr().out
+
+
+# every script of studies/high_orders with the arguments of a tiny run, in the order of
+# docs/validation-high-orders.md "Reproducing": the runs write the npz files the reports read
+# (one or two records each, a short reference for hcov.py; the file names are those the reports expect)
+HIGH_ORDER_RUNS = {
+    "check.py": (),
+    "fdcheck.py": (),
+    "look.py": (),
+    "mc.py": (1, "mc_300.npz"),
+    "mc2.py": (1, "mc2_300.npz"),
+    "mc3.py": (1, "mc3_300.npz"),
+    "mc4.py": (1, "mc4_300.npz"),
+    "mc5.py": (1, "mc5_300.npz"),
+    "boot.py": (1, 2, "boot150.npz"),
+    "hcov.py": (2, "hcov_io.npz", 0.1, 40_000),
+    "nbscan.py": (1, "nbscan.npz"),
+    "spurious.py": (1,),
+    "flag_spurious.py": (1,),
+    "wtest.py": (1,),
+    "flag_records.py": (2, "frozen.npy", 0.1, 50, 0.02, 1e300, 1),
+    "analyze.py": ("mc2_300.npz", "base", "d3"),
+    "calib.py": ("mc3_300.npz",),
+    "compact.py": ("mc3_300.npz",),
+    "flagcalib.py": ("mc5_300.npz", "w1.5", 5),
+    "flagcheck.py": ("mc5_300.npz", "w1.5"),
+    "zscore.py": ("mc2_300.npz",),
+    "xi_outliers.py": ("mc5_300.npz", "w1.5"),
+    "boot_report.py": ("boot150.npz",),
+    "hcov_report.py": ("hcov_io.npz",),
+    "final_checks.py": (),
+    "flag_threshold.py": ("frozen.npy", "frozen.npy", "5,10,20"),
+    "tables.py": (),
+    "build_doc.py": ("validation-high-orders.md",),
+    "issue11_records.py": (DATA,),
+    "issue11_tables.py": ("mc",),
+    "issue11_figure.py": ("mc", "figure.png"),
+}
+
+
+@pytest.mark.slow
+def test_high_orders(monkeypatch, tmp_path, capsys):
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.syspath_prepend(str(HIGH_ORDERS))  # the scripts import prop.py beside them
+    monkeypatch.setenv("PYTHONPATH", os.pathsep.join(sys.path))  # build_doc.py runs the reports in subprocesses
+    from modaluq.validation import monte_carlo
+
+    # what validate_runs.sh writes (the CLI's files), for issue11_tables.py and issue11_figure.py
+    for case, freeze in (("chain", True), ("chain-plain", False)):
+        (tmp_path / "mc" / case).mkdir(parents=True)
+        for r in monte_carlo(3, order=(12, 18, 24, 36), processes=1, progress=False, n_bootstrap=0,
+                             freeze_noise=freeze):
+            r.save(tmp_path / "mc" / case / f"results_n{r.settings['order']}.npz")
+    for name, args in HIGH_ORDER_RUNS.items():
+        if name == "hcov_report.py":  # tables.py reads a run without unknown forces too
+            shutil.copy(tmp_path / "hcov_io.npz", tmp_path / "hcov_io0.npz")
+        if name == "issue11_records.py" and not DATA.exists():
+            continue
+        _script(monkeypatch, name, *args)
+    assert "{{" not in (tmp_path / "validation-high-orders.md").read_text()
+    assert (tmp_path / "figure.png").stat().st_size > 0
+    assert np.load(tmp_path / "frozen.npy").shape == (2, 4, 2, 6, 6)
+    capsys.readouterr()
