@@ -18,10 +18,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ..settings import ClusteringSettings, Settings, StabilityCriteria
+from ..jsonvalues import dumps
 from .tracking import RecordModes
 
-__all__ = ["Parts", "array_of", "jsonable", "record_modes"]
+__all__ = ["Parts", "array_of", "record_modes"]
 
 
 class Parts:
@@ -33,7 +33,7 @@ class Parts:
         folder.mkdir(parents=True, exist_ok=True)
         _remove_stale_temporaries(folder)
         stamp = folder / "settings.json"
-        fingerprint = json.loads(json.dumps(config.fingerprint()))
+        fingerprint = json.loads(dumps(config.fingerprint()))
         if start_again:  # resume=False: the parts of earlier runs (perhaps other settings) are dropped
             for old in folder.glob("*.json"):
                 old.unlink()
@@ -48,7 +48,7 @@ class Parts:
                                  "differ); run again with resume=False (--no-resume) to start again with these "
                                  "settings, or write to another store")
         else:
-            _atomic_write(stamp, json.dumps(fingerprint, indent=1).encode())
+            _atomic_write(stamp, dumps(fingerprint, indent=1).encode())
 
     def path(self, key: str) -> Path:
         return self.folder / f"{hashlib.sha1(key.encode()).hexdigest()[:20]}.json"
@@ -107,23 +107,6 @@ def _atomic_write(path: Path, data: bytes) -> None:
         fh.flush()
         os.fsync(fh.fileno())
     os.replace(tmp, path)
-
-
-def jsonable(x):
-    """Arrays (complex ones as {"real", "imag"}) and NumPy scalars → JSON values; NaN stays NaN."""
-    if isinstance(x, dict):
-        return {str(k): jsonable(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [jsonable(v) for v in x]
-    if isinstance(x, np.ndarray):
-        if np.iscomplexobj(x):
-            return {"real": x.real.tolist(), "imag": x.imag.tolist()}
-        return x.tolist()
-    if isinstance(x, np.generic):
-        return x.item()
-    if isinstance(x, (Settings, StabilityCriteria, ClusteringSettings)):
-        return x.to_dict()
-    return x
 
 
 def array_of(value, dtype=float):

@@ -24,13 +24,14 @@ from typing import Optional
 import numpy as np
 
 from .._blas import single_threaded
-from ..checks import check_boolean
+from ..checks import check_boolean, check_instance
+from ..jsonvalues import dumps
 from ..results import ModalUQWarning
 from ..settings import ClusteringSettings, Settings, StabilityCriteria
 from . import store
 from .change import change_test, miscalibrated
 from .executors import cancel_queued, executor_for
-from .parts import Parts, jsonable, record_modes
+from .parts import Parts, record_modes
 from .records import covariate_matrix, record_tasks, record_times
 from .tracking import ReferenceModes, TrackingSettings, reference_period, track
 from .worker import TaskConfig, process_record
@@ -198,10 +199,10 @@ def monitor(records, *, out=None, settings: Settings | None = None, criteria: St
     """
     t0 = time.perf_counter()
     resume = check_boolean("resume", resume)
-    tracking = _typed(tracking, TrackingSettings, "tracking")
-    config = TaskConfig(settings=_typed(settings, Settings, "settings"),
-                        criteria=_typed(criteria, StabilityCriteria, "criteria"),
-                        clustering=_typed(clustering, ClusteringSettings, "clustering"),
+    tracking = check_instance("tracking", tracking, TrackingSettings)
+    config = TaskConfig(settings=check_instance("settings", settings, Settings),
+                        criteria=check_instance("criteria", criteria, StabilityCriteria),
+                        clustering=check_instance("clustering", clustering, ClusteringSettings),
                         check_harmonics=check_boolean("check_harmonics", check_harmonics),
                         read={k: v for k, v in dict(fs=fs, format=format, read_options=read_options, outputs=outputs,
                                                     inputs=inputs, references=references).items() if v is not None})
@@ -241,7 +242,7 @@ def monitor(records, *, out=None, settings: Settings | None = None, criteria: St
                             "error": f"{type(exc).__name__}: {' '.join(str(exc).split())}", "warnings": []}
                 part.update(time=None if task.time is None else str(task.time), covariates=task.covariates,
                             source=task.source if isinstance(task.source, str) else task.name)
-                text = json.dumps(jsonable(part))
+                text = dumps(part)
                 part = json.loads(text)  # the same values whether read back from a part or not
                 if parts is not None:
                     parts.write(part["key"], text)
@@ -258,14 +259,6 @@ def monitor(records, *, out=None, settings: Settings | None = None, criteria: St
     for note in result.notes:
         warnings.warn(note, ModalUQWarning, stacklevel=2)
     return result
-
-
-def _typed(value, cls, parameter):
-    if value is None:
-        return cls()
-    if not isinstance(value, cls):
-        raise TypeError(f"{parameter} must be a modaluq {cls.__name__}; got {type(value).__name__}")
-    return value
 
 
 def _consolidate(tasks: list, parts: list, tracking: TrackingSettings) -> Monitoring:

@@ -11,13 +11,13 @@ complex shapes (:data:`COMPLEX_SHAPES`) are stored as their real and imaginary p
 
 from __future__ import annotations
 
-import json
 import os
 from pathlib import Path
 
 import numpy as np
 
 from ..checks import require
+from ..jsonvalues import dumps
 from ..version import __version__
 
 __all__ = ["COMPLEX_SHAPES", "dataset", "failure_table", "load_tracks", "output_paths", "pole_table", "write"]
@@ -136,9 +136,9 @@ def dataset(tasks: list, parts: list, done: np.ndarray, tracks, test, *, channel
         coords["term"] = ["constant"] + covariate_names
     attrs = {"title": "modaluq monitoring: tracked modes", "modaluq_version": __version__,
              "false_alarm_rate": tracking.false_alarm_rate,
-             "smoothing": tracking.smoothing, "tracking": json.dumps(tracking.to_dict()),
-             "covariate_names": json.dumps(covariate_names), "tracking_error": error}
-    attrs["notes"] = json.dumps(notes)
+             "smoothing": tracking.smoothing, "tracking": dumps(tracking.to_dict()),
+             "covariate_names": dumps(covariate_names), "tracking_error": error}
+    attrs["notes"] = dumps(notes)
     ds = xr.Dataset(data, coords=coords, attrs=attrs)
     ds["status"] = ds["status"].astype(str)
     ds["failed_stage"] = ds["failed_stage"].astype(str)

@@ -17,10 +17,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..analysis import Analysis
+from ..jsonvalues import jsonable
 from ..settings import ClusteringSettings, Settings, StabilityCriteria
 from ..version import __version__
 from .executors import configure_worker_process
-from .parts import jsonable
 from .records import RecordTask
 
 __all__ = ["TaskConfig", "frequency_damping_correlation", "process_record"]
