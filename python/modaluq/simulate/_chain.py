@@ -12,8 +12,6 @@ import math
 from typing import Iterable
 
 import numpy as np
-import scipy.linalg
-import scipy.signal
 
 from ..checks import as_samples, check_integer, check_sampling_frequency
 
@@ -122,6 +120,7 @@ def chain_system(n_dof=6, *, mass=1 / 20, stiffness=None, damping_ratio=0.02):
     M = np.diag(m)
     k_right = np.append(k[1:], 0.0)  # spring to the next mass (none after the last)
     K = np.diag(k + k_right) - np.diag(k[1:], 1) - np.diag(k[1:], -1)
+    import scipy.linalg  # SciPy when simulating, not when modaluq is imported
     omega2, Phi = scipy.linalg.eigh(K, M)  # ascending, Phi^T M Phi = I
     omega = np.sqrt(omega2)
     MPhi = M @ Phi
@@ -179,6 +178,7 @@ def state_space(M, K, Cdamp, *, fs, output_dofs):
     aug = np.zeros((n + n_dof, n + n_dof))
     aug[:n, :n] = Ac
     aug[:n, n:] = Bc
+    import scipy.linalg  # SciPy when simulating, not when modaluq is imported
     E = scipy.linalg.expm(aug / fs)
     A = np.ascontiguousarray(E[:n, :n])
     B = np.ascontiguousarray(E[:n, n:])
@@ -248,6 +248,7 @@ def _zoh_sdof_filter(c, k, fs):
     aug = np.zeros((3, 3))
     aug[:2, :2] = Ac
     aug[0, 2] = 1.0
+    import scipy.linalg  # SciPy when simulating, not when modaluq is imported
     E = scipy.linalg.expm(aug / fs)
     A, B = E[:2, :2], E[:2, 2]
     # H(z) = C (zI - A)^-1 B + D with C = [-c, -k], D = 1.  For 2 x 2 matrices
@@ -270,6 +271,7 @@ class ModalPlan:
 
     def __init__(self, M, K, Cdamp, fs, output_dofs):
         out = list(output_dofs)
+        import scipy.linalg  # SciPy when simulating, not when modaluq is imported
         omega2, Phi = scipy.linalg.eigh(K, M)  # Phi^T M Phi = I
         modal_c = Phi.T @ Cdamp @ Phi
         off = modal_c - np.diag(np.diag(modal_c))
@@ -298,6 +300,8 @@ class ModalPlan:
         strides) whose lengths add up to ``n_samples``; ``on_chunk(start, y_chunk)`` is
         called with each (n_outputs, L) output block.
         """
+        import scipy.signal  # SciPy when simulating, not when modaluq is imported
+
         start = 0
         if self.kind == "real":
             state = np.zeros((len(self.filters), 2))
