@@ -276,7 +276,7 @@ def test_memory_error_in_parser_is_named(tmp_path, monkeypatch):
 # ============================================================================ 5. fuzz contract
 def test_fuzz_contract():
     """A few hundred mutations per format through the fuzz harness (tests/fuzz)."""
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "fuzz"))
+    sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "fuzz"))
     try:
         import fuzz_loaders
     finally:

@@ -10,7 +10,7 @@ import sys
 import modaluq.io as mio
 from modaluq.cli import build_parser
 
-ROOT = pathlib.Path(__file__).resolve().parents[2]
+ROOT = pathlib.Path(__file__).resolve().parents[3]
 
 
 def test_loader_tables_come_from_the_registry():

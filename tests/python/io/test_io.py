@@ -20,7 +20,7 @@ FS = 200.0
 N = 400
 NAMES = ["acc1", "acc2", "force", "acc3"]
 UNITS = ["m/s^2", "m/s^2", "N", "m/s^2"]
-SHARED = Path(__file__).resolve().parents[2].parent / "shared" / "data"
+SHARED = Path(__file__).resolve().parents[3].parent / "shared" / "data"
 if not SHARED.is_dir():
     SHARED = Path("/work/shared/data")
 
