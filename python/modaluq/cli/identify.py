@@ -15,6 +15,7 @@ import warnings
 from pathlib import Path
 
 from .. import export
+from ..io import SUPPORTED_EXTENSIONS
 from .._core import NumericalError
 from ..analysis import Analysis
 from ..checks import require
@@ -223,7 +224,7 @@ def register(subparsers) -> argparse.ArgumentParser:
                "0.01 = 1 %%. Example: modaluq identify run1.csv --inputs force --orders 2:60:2 "
                "--plot diagram.png --out modes.json --out diagram.nc",
     )
-    p.add_argument("file", help="measurement file (.csv .tsv .txt .npy .npz .mat .h5 .uff .unv .tdms)")
+    p.add_argument("file", help=f"measurement file ({' '.join(SUPPORTED_EXTENSIONS)})")
     add_analysis_options(p)
     g = p.add_argument_group("output")
     g.add_argument("--plot", metavar="IMAGE", default=None,
