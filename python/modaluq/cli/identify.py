@@ -15,10 +15,10 @@ import warnings
 from pathlib import Path
 
 from .. import export
-from ..io import SUPPORTED_EXTENSIONS
 from .._core import NumericalError
 from ..analysis import Analysis
 from ..checks import require
+from ..io import SUPPORTED_EXTENSIONS
 from ..plot import plot_stabilization_diagram
 from ..version import __version__
 from .common import CliError, check_image_paths, check_output_paths, integer_option, option_error, real_option
