@@ -113,6 +113,12 @@ class Diagram:
     criteria: StabilityCriteria = field(default_factory=StabilityCriteria)
     has_uncertainty: bool = True
     result_settings: dict = field(default_factory=dict)  #: ``Result.settings`` of the identification
+    #: (n_poles,) correlation of f and ξ of each pole (``Modes.frequency_damping_correlation``; NaN
+    #: without uncertainty); empty when unknown
+    frequency_damping_correlation: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    #: (n_poles,) bool, the blocks are shorter than half the pole's decay time (``Modes.block_too_short``);
+    #: empty when unknown
+    block_too_short: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
 
     @property
     def n_poles(self) -> int:
@@ -187,6 +193,8 @@ class Diagram:
         p.mode_shape_std_imag = np.asarray(self.mode_shape_std_imag, float)
         p.close_singular_values = np.asarray(self.close_singular_values, bool)
         p.noise_coupled = np.asarray(self.noise_coupled, bool)
+        p.frequency_damping_correlation = np.asarray(self.frequency_damping_correlation, float)
+        p.block_too_short = np.asarray(self.block_too_short, bool)
         p.orders = [int(n) for n in self.orders]
         p.has_uncertainty = bool(self.has_uncertainty)
         d = _core.Diagram()
@@ -256,7 +264,7 @@ def stabilization_diagram(result, criteria: StabilityCriteria | None = None, *,
     has_std = all(m.has_uncertainty for m in result.modes)
 
     # Flatten the orders into the core's Poles; the judging is the core's (stabilization.hpp).
-    cols = {k: [] for k in ("order", "f", "xi", "sf", "sxi", "close", "coupled")}
+    cols = {k: [] for k in ("order", "f", "xi", "sf", "sxi", "close", "coupled", "rho", "slow")}
     shapes, shapes_sr, shapes_si = [], [], []
     for m in result.modes:
         n = m.n_modes
@@ -269,6 +277,9 @@ def stabilization_diagram(result, criteria: StabilityCriteria | None = None, *,
         cols["close"].append(np.full(n, bool(m.close_singular_values)))
         coupled = getattr(m, "noise_coupled", None)
         cols["coupled"].append(np.zeros(n, bool) if coupled is None else np.asarray(coupled, bool).reshape(n))
+        rho, slow = getattr(m, "frequency_damping_correlation", None), getattr(m, "block_too_short", None)
+        cols["rho"].append(nan if rho is None or not has_std else np.asarray(rho, float).reshape(n))
+        cols["slow"].append(np.zeros(n, bool) if slow is None or not has_std else np.asarray(slow, bool).reshape(n))
         shapes.append(np.asarray(m.mode_shape, complex).reshape(n_out, n))
         nan2 = np.full((n_out, n), np.nan)
         shapes_sr.append(np.asarray(m.mode_shape_std_real, float).reshape(n_out, n) if has_std else nan2)
@@ -281,6 +292,8 @@ def stabilization_diagram(result, criteria: StabilityCriteria | None = None, *,
     poles.damping_std = _concat(cols["sxi"])
     poles.close_singular_values = _concat(cols["close"], bool)
     poles.noise_coupled = _concat(cols["coupled"], bool)
+    poles.frequency_damping_correlation = _concat(cols["rho"])
+    poles.block_too_short = _concat(cols["slow"], bool)
     poles.mode_shape = np.concatenate(shapes, axis=1) if shapes else np.zeros((n_out, 0), complex)
     poles.mode_shape_std_real = np.concatenate(shapes_sr, axis=1) if shapes else np.zeros((n_out, 0))
     poles.mode_shape_std_imag = np.concatenate(shapes_si, axis=1) if shapes else np.zeros((n_out, 0))
@@ -310,6 +323,7 @@ def stabilization_diagram(result, criteria: StabilityCriteria | None = None, *,
         noise_coupled=np.asarray(p.noise_coupled, bool), orders=tuple(int(o) for o in p.orders),
         fs=float(result.fs), output_names=names, criteria=criteria, has_uncertainty=has_std,
         result_settings=dict(result.settings),
+        frequency_damping_correlation=p.frequency_damping_correlation, block_too_short=p.block_too_short,
     )
 
 
