@@ -23,6 +23,7 @@ void modaluq::python::bind_identify(py::module_& m) {
         .def_readonly("mode_shape_std_real", &Modes::mode_shape_std_real)
         .def_readonly("mode_shape_std_imag", &Modes::mode_shape_std_imag)
         .def_readonly("covariance", &Modes::covariance)
+        .def_readonly("frequency_damping_correlation", &Modes::frequency_damping_correlation)
         .def_readonly("block_too_short", &Modes::block_too_short)
         .def_readonly("singular_value_gap", &Modes::singular_value_gap)
         .def_readonly("close_singular_values", &Modes::close_singular_values)
@@ -30,6 +31,21 @@ void modaluq::python::bind_identify(py::module_& m) {
         .def_readonly("noise_coupled", &Modes::noise_coupled)
         .def_readonly("degenerate", &Modes::degenerate)
         .def_readonly("note", &Modes::note);
+
+    py::enum_<IdentificationWarning>(m, "IdentificationWarning")
+        .value("input_rank_deficient", IdentificationWarning::input_rank_deficient)
+        .value("too_few_blocks", IdentificationWarning::too_few_blocks)
+        .value("low_signal_to_noise", IdentificationWarning::low_signal_to_noise)
+        .value("degenerate_orders", IdentificationWarning::degenerate_orders)
+        .value("slow_decay", IdentificationWarning::slow_decay);
+    py::class_<SlowDecay>(m, "SlowDecay")
+        .def(py::init<>())
+        .def_readonly("n_poles", &SlowDecay::n_poles)
+        .def_readonly("block_seconds", &SlowDecay::block_seconds)
+        .def_readonly("longest_decay_s", &SlowDecay::longest_decay_s)
+        .def_readonly("record_seconds", &SlowDecay::record_seconds)
+        .def_readonly("fitting_n_blocks", &SlowDecay::fitting_n_blocks)
+        .def_property_readonly("record_too_short", &SlowDecay::record_too_short);
 
     py::class_<IdentifyOptions>(m, "IdentifyOptions")
         .def(py::init<>())
@@ -66,7 +82,9 @@ void modaluq::python::bind_identify(py::module_& m) {
         .def_readonly("signal_to_noise", &Identification::signal_to_noise)
         .def_readonly("low_signal_to_noise", &Identification::low_signal_to_noise)
         .def_readonly("significant_singular_values", &Identification::significant_singular_values)
-        .def_readonly("warnings", &Identification::warnings);
+        .def_readonly("slow_decay", &Identification::slow_decay)
+        .def_readonly("warnings", &Identification::warnings)
+        .def_readonly("warning_codes", &Identification::warning_codes);
 
     m.def("identify", py::overload_cast<const ConstRef&, const ConstRef&, IdentifyOptions>(&identify),
           py::arg("y_t").noconvert(), py::arg("u_t").noconvert(), py::arg("options"),

@@ -21,6 +21,10 @@ void modaluq::python::bind_stabilization(py::module_& m) {
         .value("complete", Linkage::complete)
         .value("average", Linkage::average)
         .value("weighted", Linkage::weighted);
+    py::enum_<DropReason>(m, "DropReason")
+        .value("too_few_poles", DropReason::too_few_poles)
+        .value("frequency_std_above_bandwidth", DropReason::frequency_std_above_bandwidth)
+        .value("twin", DropReason::twin);
 
     py::class_<StabilityCriteria>(m, "StabilityCriteria")
         .def(py::init<>())
@@ -49,6 +53,8 @@ void modaluq::python::bind_stabilization(py::module_& m) {
         .def_readwrite("mode_shape_std_imag", &Poles::mode_shape_std_imag)
         .def_readwrite("close_singular_values", &Poles::close_singular_values)
         .def_readwrite("noise_coupled", &Poles::noise_coupled)
+        .def_readwrite("frequency_damping_correlation", &Poles::frequency_damping_correlation)
+        .def_readwrite("block_too_short", &Poles::block_too_short)
         .def_readwrite("orders", &Poles::orders)
         .def_readwrite("has_uncertainty", &Poles::has_uncertainty)
         .def("validate", &Poles::validate);
@@ -110,8 +116,32 @@ void modaluq::python::bind_stabilization(py::module_& m) {
         .def_readonly("dropped_frequency_hz", &SelectedModes::dropped_frequency_hz)
         .def_readonly("dropped_n_poles", &SelectedModes::dropped_n_poles)
         .def_readonly("dropped_reason", &SelectedModes::dropped_reason)
+        .def_readonly("dropped_code", &SelectedModes::dropped_code)
+        .def_readonly("dropped_min_size", &SelectedModes::dropped_min_size)
+        .def_readonly("dropped_first_order", &SelectedModes::dropped_first_order)
+        .def_readonly("dropped_frequency_std_per_bandwidth", &SelectedModes::dropped_frequency_std_per_bandwidth)
+        .def_readonly("dropped_twin_mode", &SelectedModes::dropped_twin_mode)
+        .def_readonly("dropped_twin_frequency_hz", &SelectedModes::dropped_twin_frequency_hz)
+        .def_readonly("dropped_twin_mac", &SelectedModes::dropped_twin_mac)
         .def_readonly("frequency_std_per_bandwidth", &SelectedModes::frequency_std_per_bandwidth)
-        .def_readonly("min_cluster_size", &SelectedModes::min_cluster_size);
+        .def_readonly("frequency_damping_correlation", &SelectedModes::frequency_damping_correlation)
+        .def_readonly("block_too_short", &SelectedModes::block_too_short)
+        .def_readonly("min_cluster_size", &SelectedModes::min_cluster_size)
+        .def_readonly("max_frequency_std_per_bandwidth", &SelectedModes::max_frequency_std_per_bandwidth);
     m.def("select_modes", &select_modes, py::arg("diagram"), py::arg("options"),
           py::call_guard<py::gil_scoped_release>());
+    // The core's clustering (detail/linkage.hpp) on its own: labels 0..k-1 numbered by first point.
+    m.def(
+        "cluster_labels",
+        [](const Eigen::Ref<const Eigen::MatrixXd>& distances, Linkage linkage, double threshold) {
+            detail::require(distances.rows() == distances.cols(), "distances must be a square matrix, got ",
+                            distances.rows(), " x ", distances.cols());
+            detail::require(!std::isnan(threshold), "threshold must be a number, got NaN");
+            detail::require(distances.allFinite(), "distances must be finite");
+            detail::require(distances == distances.transpose(), "distances must be symmetric");
+            detail::require((distances.diagonal().array() == 0.0).all(), "distances must have a zero diagonal");
+            std::vector<Index> labels = detail::flat_clusters(distances, linkage, threshold);
+            return IndexVector(Eigen::Map<const IndexVector>(labels.data(), Index(labels.size())));
+        },
+        py::arg("distances"), py::arg("linkage"), py::arg("threshold"), py::call_guard<py::gil_scoped_release>());
 }

@@ -8,7 +8,7 @@ import collections.abc
 import numpy
 import numpy.typing
 import typing
-__all__: list[str] = ['ClusteringOptions', 'CovarianceAccumulator', 'Covariances', 'Diagram', 'HankelLayout', 'Identification', 'IdentifyOptions', 'Linkage', 'Modes', 'NumericalError', 'PoleStatus', 'Poles', 'SelectedModes', 'StabilityCriteria', 'compute_covariances', 'identify', 'identify_covariances', 'modal_assurance_criterion', 'poles_of', 'select_modes', 'stabilization_diagram', 'uses_blas']
+__all__: list[str] = ['ClusteringOptions', 'CovarianceAccumulator', 'Covariances', 'Diagram', 'DropReason', 'HankelLayout', 'Identification', 'IdentificationWarning', 'IdentifyOptions', 'Linkage', 'Modes', 'NumericalError', 'PoleStatus', 'Poles', 'SelectedModes', 'SlowDecay', 'StabilityCriteria', 'cluster_labels', 'compute_covariances', 'identify', 'identify_covariances', 'modal_assurance_criterion', 'poles_of', 'select_modes', 'stabilization_diagram', 'uses_blas']
 class NumericalError(ArithmeticError):
     pass
 class HankelLayout:
@@ -141,6 +141,9 @@ class Modes:
     def eigenvalue(self) -> typing.Annotated[numpy.typing.NDArray[numpy.complex128], "[m, 1]"]:
         ...
     @property
+    def frequency_damping_correlation(self) -> typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 1]"]:
+        ...
+    @property
     def frequency_hz(self) -> typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 1]"]:
         ...
     @property
@@ -172,6 +175,81 @@ class Modes:
         ...
     @property
     def singular_value_gap(self) -> float:
+        ...
+class IdentificationWarning:
+    """
+    Members:
+    
+      input_rank_deficient
+    
+      too_few_blocks
+    
+      low_signal_to_noise
+    
+      degenerate_orders
+    
+      slow_decay
+    """
+    __members__: typing.ClassVar[dict[str, IdentificationWarning]]
+    degenerate_orders: typing.ClassVar[IdentificationWarning]
+    input_rank_deficient: typing.ClassVar[IdentificationWarning]
+    low_signal_to_noise: typing.ClassVar[IdentificationWarning]
+    slow_decay: typing.ClassVar[IdentificationWarning]
+    too_few_blocks: typing.ClassVar[IdentificationWarning]
+    @typing.overload
+    def __eq__(self, other: IdentificationWarning) -> bool:
+        ...
+    @typing.overload
+    def __eq__(self, other: typing.Any) -> bool:
+        ...
+    def __getstate__(self) -> int:
+        ...
+    def __hash__(self) -> int:
+        ...
+    def __index__(self) -> int:
+        ...
+    def __init__(self, value: typing.SupportsInt | typing.SupportsIndex) -> None:
+        ...
+    def __int__(self) -> int:
+        ...
+    @typing.overload
+    def __ne__(self, other: IdentificationWarning) -> bool:
+        ...
+    @typing.overload
+    def __ne__(self, other: typing.Any) -> bool:
+        ...
+    def __repr__(self) -> str:
+        ...
+    def __setstate__(self, state: typing.SupportsInt | typing.SupportsIndex) -> None:
+        ...
+    def __str__(self) -> str:
+        ...
+    @property
+    def name(self) -> str:
+        ...
+    @property
+    def value(self) -> int:
+        ...
+class SlowDecay:
+    def __init__(self) -> None:
+        ...
+    @property
+    def block_seconds(self) -> float:
+        ...
+    @property
+    def fitting_n_blocks(self) -> int:
+        ...
+    @property
+    def longest_decay_s(self) -> float:
+        ...
+    @property
+    def n_poles(self) -> int:
+        ...
+    @property
+    def record_seconds(self) -> float:
+        ...
+    @property
+    def record_too_short(self) -> bool:
         ...
 class IdentifyOptions:
     max_threads: typing.ClassVar[int] = 1024
@@ -288,7 +366,13 @@ class Identification:
     def singular_values(self) -> typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 1]"]:
         ...
     @property
+    def slow_decay(self) -> SlowDecay:
+        ...
+    @property
     def too_few_blocks(self) -> bool:
+        ...
+    @property
+    def warning_codes(self) -> list[IdentificationWarning]:
         ...
     @property
     def warnings(self) -> list[str]:
@@ -395,6 +479,54 @@ class Linkage:
     @property
     def value(self) -> int:
         ...
+class DropReason:
+    """
+    Members:
+    
+      too_few_poles
+    
+      frequency_std_above_bandwidth
+    
+      twin
+    """
+    __members__: typing.ClassVar[dict[str, DropReason]]
+    frequency_std_above_bandwidth: typing.ClassVar[DropReason]
+    too_few_poles: typing.ClassVar[DropReason]
+    twin: typing.ClassVar[DropReason]
+    @typing.overload
+    def __eq__(self, other: DropReason) -> bool:
+        ...
+    @typing.overload
+    def __eq__(self, other: typing.Any) -> bool:
+        ...
+    def __getstate__(self) -> int:
+        ...
+    def __hash__(self) -> int:
+        ...
+    def __index__(self) -> int:
+        ...
+    def __init__(self, value: typing.SupportsInt | typing.SupportsIndex) -> None:
+        ...
+    def __int__(self) -> int:
+        ...
+    @typing.overload
+    def __ne__(self, other: DropReason) -> bool:
+        ...
+    @typing.overload
+    def __ne__(self, other: typing.Any) -> bool:
+        ...
+    def __repr__(self) -> str:
+        ...
+    def __setstate__(self, state: typing.SupportsInt | typing.SupportsIndex) -> None:
+        ...
+    def __str__(self) -> str:
+        ...
+    @property
+    def name(self) -> str:
+        ...
+    @property
+    def value(self) -> int:
+        ...
 class StabilityCriteria:
     def __init__(self) -> None:
         ...
@@ -473,6 +605,12 @@ class Poles:
     def validate(self) -> None:
         ...
     @property
+    def block_too_short(self) -> typing.Annotated[numpy.typing.NDArray[numpy.bool], "[m, 1]"]:
+        ...
+    @block_too_short.setter
+    def block_too_short(self, arg0: typing.Annotated[numpy.typing.ArrayLike, numpy.bool, "[m, 1]"]) -> None:
+        ...
+    @property
     def close_singular_values(self) -> typing.Annotated[numpy.typing.NDArray[numpy.bool], "[m, 1]"]:
         ...
     @close_singular_values.setter
@@ -489,6 +627,12 @@ class Poles:
         ...
     @damping_std.setter
     def damping_std(self, arg0: typing.Annotated[numpy.typing.ArrayLike, numpy.float64, "[m, 1]"]) -> None:
+        ...
+    @property
+    def frequency_damping_correlation(self) -> typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 1]"]:
+        ...
+    @frequency_damping_correlation.setter
+    def frequency_damping_correlation(self, arg0: typing.Annotated[numpy.typing.ArrayLike, numpy.float64, "[m, 1]"]) -> None:
         ...
     @property
     def frequency_hz(self) -> typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 1]"]:
@@ -656,6 +800,9 @@ class ClusteringOptions:
         ...
 class SelectedModes:
     @property
+    def block_too_short(self) -> typing.Annotated[numpy.typing.NDArray[numpy.bool], "[m, 1]"]:
+        ...
+    @property
     def damping_ratio(self) -> typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 1]"]:
         ...
     @property
@@ -665,13 +812,37 @@ class SelectedModes:
     def damping_std(self) -> typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 1]"]:
         ...
     @property
+    def dropped_code(self) -> list[DropReason]:
+        ...
+    @property
+    def dropped_first_order(self) -> typing.Annotated[numpy.typing.NDArray[numpy.int64], "[m, 1]"]:
+        ...
+    @property
     def dropped_frequency_hz(self) -> typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 1]"]:
+        ...
+    @property
+    def dropped_frequency_std_per_bandwidth(self) -> typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 1]"]:
+        ...
+    @property
+    def dropped_min_size(self) -> typing.Annotated[numpy.typing.NDArray[numpy.int64], "[m, 1]"]:
         ...
     @property
     def dropped_n_poles(self) -> typing.Annotated[numpy.typing.NDArray[numpy.int64], "[m, 1]"]:
         ...
     @property
     def dropped_reason(self) -> list[str]:
+        ...
+    @property
+    def dropped_twin_frequency_hz(self) -> typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 1]"]:
+        ...
+    @property
+    def dropped_twin_mac(self) -> typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 1]"]:
+        ...
+    @property
+    def dropped_twin_mode(self) -> typing.Annotated[numpy.typing.NDArray[numpy.int64], "[m, 1]"]:
+        ...
+    @property
+    def frequency_damping_correlation(self) -> typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 1]"]:
         ...
     @property
     def frequency_hz(self) -> typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 1]"]:
@@ -684,6 +855,9 @@ class SelectedModes:
         ...
     @property
     def frequency_std_per_bandwidth(self) -> typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 1]"]:
+        ...
+    @property
+    def max_frequency_std_per_bandwidth(self) -> float:
         ...
     @property
     def members(self) -> list[list[int]]:
@@ -728,6 +902,8 @@ class SelectedModes:
     def representative_pole(self) -> typing.Annotated[numpy.typing.NDArray[numpy.int64], "[m, 1]"]:
         ...
 def _data_pointer(x: typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, n]", "flags.f_contiguous"]) -> int:
+    ...
+def cluster_labels(distances: typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, n]", "flags.f_contiguous"], linkage: Linkage, threshold: typing.SupportsFloat | typing.SupportsIndex) -> typing.Annotated[numpy.typing.NDArray[numpy.int64], "[m, 1]"]:
     ...
 def compute_covariances(y_t: typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, n]", "flags.f_contiguous"], u_t: typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, n]", "flags.f_contiguous"], layout: HankelLayout, n_blocks: typing.SupportsInt | typing.SupportsIndex, demean: bool = True, with_blocks: bool = True, threads: typing.SupportsInt | typing.SupportsIndex = 1) -> Covariances:
     ...

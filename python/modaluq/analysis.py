@@ -34,8 +34,8 @@ from .io import Recording, load
 from .jsonvalues import finite_or_none, jsonable
 from .preprocess import Preprocessed, preprocess
 from .provenance import provenance
-from .results import ModalUQWarning, Result
-from .selection import SelectedModes, select_modes
+from .results import IdentificationWarning, ModalUQWarning, Result
+from .selection import DropReason, SelectedModes, select_modes
 from .settings import ClusteringSettings, PoleStatus, Settings, StabilityCriteria
 from .stabilization import Diagram, stabilization_diagram
 
@@ -80,33 +80,29 @@ def describe_orders(orders) -> str:
     return ", ".join(map(str, orders))
 
 
-#: the identification's warning of poles whose decay outlasts the blocks (cpp/include/modaluq/identify.hpp)
-SLOW_DECAY = "decay more slowly than the blocks are long"
-
-
 def _warnings_of_selection(result: Result, selected: SelectedModes, fs: float) -> list:
-    """The identification's warnings, with the one on slowly decaying poles said of the selected
-    modes, by the core's rule (blocks shorter than half the decay time 1/(2π f ξ)): it counts every
-    pole of every order, mostly spurious ones with ξ near 0, and matters for a mode reported."""
+    """The identification's warnings, with the one on slowly decaying poles (``Result.slow_decay``)
+    said of the selected modes, by the core's flag of each representative pole (blocks shorter
+    than half the decay time 1/(2π f ξ)): the core counts every pole of every order, mostly
+    spurious ones with ξ near 0, and it matters for a mode reported."""
     out = list(result.warnings)
-    k = next((i for i, w in enumerate(out) if SLOW_DECAY in w), None)
-    if k is None or not selected.n_modes or not result.n_blocks:
+    if result.slow_decay is None or not selected.n_modes or not result.n_blocks:
         return out
-    block_s = result.block_length / fs
-    f, xi = selected.frequency_hz, selected.damping_ratio
-    decay = np.full(f.shape, np.inf)
-    decay[xi > 0] = 1.0 / (2 * np.pi * f[xi > 0] * xi[xi > 0])
-    slow = (xi > 0) & (block_s < 0.5 * decay)
+    k = result.warning_codes.index(IdentificationWarning.SLOW_DECAY)
+    slow = np.asarray(selected.block_too_short, bool)
     if not slow.any():
         del out[k]
         return out
-    longest = float(decay[slow].max())
-    fitting = int(result.n_blocks * result.block_length / fs / (0.5 * longest))
+    block_s = result.slow_decay.block_seconds
+    f, xi = selected.frequency_hz[slow], selected.damping_ratio[slow]
+    longest = float((1.0 / (2 * np.pi * f * xi)).max())  # the decay time the blocks should cover
+    fitting = int(result.n_blocks * result.block_length / fs / (0.5 * longest))  # blocks of half that time
     advice = (f"use n_blocks <= {fitting}" if fitting >= 2
               else "the record is too short for their decay (a longer record is needed)")
-    out[k] = (f"{int(slow.sum())} of the {selected.n_modes} selected modes ({', '.join(f'{x:.4g}' for x in f[slow])} "
-              f"Hz) {SLOW_DECAY} (blocks of {block_s:.3g} s, less than half of the decay time 1/(2 pi f xi), up "
-              f"to {longest:.3g} s): their standard deviations are less reliable; {advice}")
+    out[k] = (f"{int(slow.sum())} of the {selected.n_modes} selected modes ({', '.join(f'{x:.4g}' for x in f)} "
+              f"Hz) decay more slowly than the blocks are long (blocks of {block_s:.3g} s, less than half of the "
+              f"decay time 1/(2 pi f xi), up to {longest:.3g} s): their standard deviations are less reliable; "
+              f"{advice}")
     return out
 
 
@@ -365,12 +361,13 @@ class Analysis:
         if self.horizons is not None:
             lines += ["", str(self.horizons)]
         # the largest dropped clusters, with why: what a person checks against the diagram
-        dropped = sorted(zip(sel.dropped_n_poles, sel.dropped_frequency_hz, sel.dropped_reason),
+        dropped = sorted(zip(sel.dropped_n_poles, sel.dropped_frequency_hz, sel.dropped_reason, sel.dropped_code),
                          key=lambda t: (-t[0], t[1]))
-        shown = [d for d in dropped if d[0] >= max(3, sel.min_cluster_size // 2) or "bandwidth" in d[2]][:8]
+        shown = [d for d in dropped if d[0] >= max(3, sel.min_cluster_size // 2)
+                 or d[3] is DropReason.FREQUENCY_STD_ABOVE_BANDWIDTH][:8]
         if shown:
             lines.append(f"dropped clusters ({len(dropped)} in all; the largest):")
-            lines += [f"  {f:.4g} Hz: {why}" for n, f, why in sorted(shown, key=lambda t: t[1])]
+            lines += [f"  {f:.4g} Hz: {why}" for n, f, why, _ in sorted(shown, key=lambda t: t[1])]
         return "\n".join(lines)
 
     def __str__(self) -> str:

@@ -8,6 +8,7 @@ fields), so those methods import downwards (docs/architecture.md).
 
 from __future__ import annotations
 
+import enum
 import warnings
 from dataclasses import dataclass, field
 
@@ -17,11 +18,51 @@ from .checks import check_boolean
 from .selection import select_modes
 from .stabilization import stabilization_diagram
 
-__all__ = ["ModalUQWarning", "Modes", "Result", "result_from_core", "warn_all"]
+__all__ = ["IdentificationWarning", "ModalUQWarning", "Modes", "Result", "SlowDecay", "result_from_core", "warn_all"]
 
 
 class ModalUQWarning(UserWarning):
     """A result is computed but a quality flag is set (see ``Result.warnings``)."""
+
+
+class IdentificationWarning(str, enum.Enum):
+    """What one of the core's ``Result.warnings`` is about (``identify.hpp``); the numbers it
+    words are fields of the :class:`Result` (``slow_decay``, ``signal_to_noise`` ...)."""
+
+    INPUT_RANK_DEFICIENT = "input_rank_deficient"  #: ``input_rank_deficient``, ``input_rank``
+    TOO_FEW_BLOCKS = "too_few_blocks"              #: ``too_few_blocks``, ``n_blocks``
+    LOW_SIGNAL_TO_NOISE = "low_signal_to_noise"    #: ``low_signal_to_noise``, ``signal_to_noise``
+    DEGENERATE_ORDERS = "degenerate_orders"        #: ``Modes.degenerate`` of some orders, ``numerical_rank``
+    SLOW_DECAY = "slow_decay"                      #: ``slow_decay``
+
+    def __str__(self) -> str:
+        return self.value
+
+
+@dataclass(frozen=True)
+class SlowDecay:
+    """The core's finding of poles that decay more slowly than the blocks are long
+    (``Modes.block_too_short``, over every order): their σ are less reliable."""
+
+    n_poles: int               #: poles flagged, every order
+    block_seconds: float       #: length of one block, s
+    longest_decay_s: float     #: largest decay time 1/(2π f ξ) of the flagged poles, s
+    record_seconds: float      #: the record's Hankel columns / fs, s
+    #: record_seconds / (longest_decay_s / 2): the most blocks each as long as half that decay time
+    fitting_n_blocks: int
+
+    @property
+    def record_too_short(self) -> bool:
+        """Fewer than 2 such blocks fit: only a longer record helps."""
+        return self.fitting_n_blocks < 2
+
+    @classmethod
+    def _from_core(cls, s) -> "SlowDecay | None":
+        if not s.n_poles:
+            return None
+        return cls(n_poles=int(s.n_poles), block_seconds=float(s.block_seconds),
+                   longest_decay_s=float(s.longest_decay_s), record_seconds=float(s.record_seconds),
+                   fitting_n_blocks=int(s.fitting_n_blocks))
 
 
 # --------------------------------------------------------------------------- results
@@ -49,6 +90,8 @@ class Modes:
     mode_shape_std_real: np.ndarray | None = None  #: (n_outputs, n_modes)
     mode_shape_std_imag: np.ndarray | None = None  #: (n_outputs, n_modes)
     covariance: np.ndarray | None = None         #: (n_modes, 2+2l, 2+2l) of [f, xi, Re shape, Im shape]
+    #: (n_modes,) correlation of f and ξ from ``covariance`` (the core's; NaN where a variance is 0)
+    frequency_damping_correlation: np.ndarray | None = None
     block_too_short: np.ndarray | None = None    #: (n_modes,) blocks shorter than half the decay time
     singular_value_gap: float = float("nan")     #: (s_n - s_{n+1}) / its std
     close_singular_values: bool = False          #: the order cuts significant singular values within 3 std
@@ -81,6 +124,7 @@ class Modes:
             mode_shape_std_real=m.mode_shape_std_real if has_std else None,
             mode_shape_std_imag=m.mode_shape_std_imag if has_std else None,
             covariance=cov,
+            frequency_damping_correlation=m.frequency_damping_correlation if has_std else None,
             block_too_short=m.block_too_short if has_std else None,
             singular_value_gap=float(m.singular_value_gap),
             close_singular_values=bool(m.close_singular_values),
@@ -176,6 +220,11 @@ class Result:
     significant_singular_values: int = 0
     warnings: tuple = field(default_factory=tuple)
     output_names: tuple = ()          #: one name per output channel (default y0, y1, ...)
+    #: per entry of ``warnings``, what it is about: an :class:`IdentificationWarning` for the core's
+    #: (the first entries), None for those Python adds after them (horizons, chosen settings)
+    warning_codes: tuple = ()
+    #: the core's finding of poles decaying more slowly than the blocks are long; None when none is
+    slow_decay: SlowDecay | None = None
     #: The core's ``Identification`` these modes were read from, set by :func:`identify` and
     #: ``CovarianceAccumulator.identify`` (:func:`result_from_core`): the diagram is made from it
     #: by the core (``_core.poles_of``). ``None`` for a Result made otherwise (by hand,
@@ -299,6 +348,8 @@ def result_from_core(ident, settings, n_outputs, n_inputs, extra_warnings=(), ou
         low_signal_to_noise=bool(ident.low_signal_to_noise),
         significant_singular_values=int(ident.significant_singular_values),
         warnings=tuple(ident.warnings) + tuple(extra_warnings),
+        warning_codes=tuple(IdentificationWarning(c.name) for c in ident.warning_codes) + (None,) * len(extra_warnings),
+        slow_decay=SlowDecay._from_core(ident.slow_decay),
     )
     object.__setattr__(result, "_identification", ident)
     return result

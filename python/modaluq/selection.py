@@ -9,11 +9,15 @@ reported at one representative pole, with the median analytic standard deviation
 reliable poles next to the spread of its members.
 
 The clustering runs in the C++ core (``cpp/include/modaluq/selection.hpp``); this module
-translates its result into :class:`SelectedModes`.
+translates its result into :class:`SelectedModes`. The core says why a cluster was dropped
+by a code (:class:`DropReason`) and the numbers behind it; :func:`dropped_reason_text` words
+them (docs/architecture.md, "the seam").
 """
 
 from __future__ import annotations
 
+import dataclasses
+import enum
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -21,7 +25,45 @@ import numpy as np
 from . import _core
 from .settings import ClusteringSettings
 
-__all__ = ["SelectedModes", "select_modes"]
+__all__ = ["DropReason", "SelectedModes", "dropped_reason_text", "select_modes"]
+
+
+class DropReason(str, enum.Enum):
+    """Why :func:`select_modes` dropped a cluster (the core's ``DropReason``, selection.hpp)."""
+
+    #: fewer poles (one per order) than the minimum size: ``dropped_n_poles < dropped_min_size``
+    TOO_FEW_POLES = "too_few_poles"
+    #: median σ_f / (f ξ) above ``max_frequency_std_per_bandwidth``: the frequency is less certain
+    #: than the peak's half-power bandwidth
+    FREQUENCY_STD_ABOVE_BANDWIDTH = "frequency_std_above_bandwidth"
+    #: a twin of a kept mode (same shape, close in frequency, from higher orders): ``dropped_twin_*``
+    TWIN = "twin"
+
+    def __str__(self) -> str:
+        return self.value
+
+
+def _percent(x: float) -> str:
+    return "%.3g %%" % (100.0 * x)  # as the core's detail::percent
+
+
+def dropped_reason_text(sel: "SelectedModes", k: int) -> str:
+    """Why dropped cluster ``k`` of ``sel`` was dropped, in words, from its code and numbers
+    (the words of selection.hpp's ``dropped_reason``)."""
+    code = sel.dropped_code[k]
+    if code is DropReason.TOO_FEW_POLES:
+        n = int(sel.dropped_n_poles[k])
+        return f"{n} {'pole' if n == 1 else 'poles'}, fewer than {int(sel.dropped_min_size[k])}"
+    if code is DropReason.FREQUENCY_STD_ABOVE_BANDWIDTH:
+        return ("frequency std %.3g x the half-power bandwidth f xi (more than %g)"
+                % (sel.dropped_frequency_std_per_bandwidth[k], sel.max_frequency_std_per_bandwidth))
+    if code is DropReason.TWIN:
+        f, twin_f = float(sel.dropped_frequency_hz[k]), float(sel.dropped_twin_frequency_hz[k])
+        twin = int(sel.dropped_twin_mode[k])
+        return ("a twin of the %.4g Hz mode: same shape (MAC %.2f), %s away, from order %d (the mode from order %d)"
+                % (twin_f, sel.dropped_twin_mac[k], _percent(abs(f - twin_f) / twin_f),
+                   sel.dropped_first_order[k], sel.order_min[twin]))
+    raise ValueError(f"dropped_code[{k}] is not a DropReason: {code!r}")
 
 
 @dataclass(frozen=True, repr=False)
@@ -62,9 +104,30 @@ class SelectedModes:
     output_names: tuple
     settings: ClusteringSettings = field(default_factory=ClusteringSettings)
     has_uncertainty: bool = True
-    dropped_reason: tuple = ()         #: why each cluster was dropped, in words
+    dropped_reason: tuple = ()         #: why each cluster was dropped, in words (:func:`dropped_reason_text`)
     #: (n_modes,) median σ_f / (f ξ) over the cluster (NaN without uncertainty)
     frequency_std_per_bandwidth: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    dropped_code: tuple = ()           #: why each cluster was dropped, a :class:`DropReason`
+    #: the minimum size that applied to each dropped cluster
+    dropped_min_size: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    #: lowest order of each dropped cluster
+    dropped_first_order: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    #: median σ_f / (f ξ) of each dropped cluster (NaN where not judged: no uncertainty or no limit)
+    dropped_frequency_std_per_bandwidth: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    #: DropReason.TWIN: the mode (index from 0 into these arrays) the cluster is a twin of, else -1
+    dropped_twin_mode: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    #: DropReason.TWIN: that mode's median frequency over its cluster, Hz, else NaN
+    dropped_twin_frequency_hz: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    #: DropReason.TWIN: MAC between the two clusters' shapes, else NaN
+    dropped_twin_mac: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    #: the limit on σ_f / (f ξ) applied (NaN: no such test, or no uncertainty)
+    max_frequency_std_per_bandwidth: float = float("nan")
+    #: (n_modes,) correlation of f and ξ of the representative pole (NaN without uncertainty): with
+    #: the std of that pole, the covariance of [f, ξ]
+    frequency_damping_correlation: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    #: (n_modes,) bool, the blocks are shorter than half the representative pole's decay time
+    #: 1/(2π f ξ) (the core's ``block_too_short``): its σ are less reliable
+    block_too_short: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
 
     @property
     def n_modes(self) -> int:
@@ -120,10 +183,10 @@ class SelectedModes:
         s = f"{self.n_modes} modes (std: analytic, median over the cluster; spread: across the cluster)\n"
         s += self.table()
         if self.dropped_n_poles.size:
-            # counted by the reason each carries (selection.hpp words them)
-            too_small = sum(1 for r in self.dropped_reason if "fewer than" in r)
-            too_uncertain = sum(1 for r in self.dropped_reason if "half-power bandwidth" in r)
-            twins = sum(1 for r in self.dropped_reason if r.startswith("a twin of"))
+            # counted by the core's code of each
+            too_small = self.dropped_code.count(DropReason.TOO_FEW_POLES)
+            too_uncertain = self.dropped_code.count(DropReason.FREQUENCY_STD_ABOVE_BANDWIDTH)
+            twins = self.dropped_code.count(DropReason.TWIN)
             parts = []
             if too_small:
                 parts.append(f"{too_small} with fewer than {self.min_cluster_size} poles")
@@ -163,7 +226,8 @@ def select_modes(diagram, settings: ClusteringSettings | None = None, **kwargs) 
        ``σ_f / (f ξ)`` exceeds ``max_frequency_std_per_bandwidth`` (default 1: the frequency is
        less certain than the half-power bandwidth of the peak; spurious poles, whose σ the noise
        directions inflate, have 2–5, structural modes 0.05–0.7 on the shared records); each is
-       reported in ``dropped_frequency_hz`` / ``dropped_n_poles`` / ``dropped_reason``;
+       reported in ``dropped_frequency_hz`` / ``dropped_n_poles`` / ``dropped_code`` (a
+       :class:`DropReason`, with the numbers in ``dropped_*``) / ``dropped_reason`` (in words);
     6. the representative of a cluster is its member nearest to the cluster's median frequency
        among the members at orders that do **not** cut close singular values (whose σ are
        meaningful), or among all members when every member's order does; ties go to the higher
@@ -201,7 +265,7 @@ def select_modes(diagram, settings: ClusteringSettings | None = None, **kwargs) 
         raise TypeError(f"settings must be a ClusteringSettings; got {type(settings).__name__}")
 
     sel = _core.select_modes(core_diagram, settings.to_core())
-    return SelectedModes(
+    modes = SelectedModes(
         frequency_hz=sel.frequency_hz, damping_ratio=sel.damping_ratio, mode_shape=sel.mode_shape,
         frequency_std=sel.frequency_std, damping_std=sel.damping_std,
         mode_shape_std_real=sel.mode_shape_std_real, mode_shape_std_imag=sel.mode_shape_std_imag,
@@ -215,6 +279,18 @@ def select_modes(diagram, settings: ClusteringSettings | None = None, **kwargs) 
         mode_of_pole=np.asarray(sel.mode_of_pole, np.int64),
         dropped_frequency_hz=sel.dropped_frequency_hz, dropped_n_poles=np.asarray(sel.dropped_n_poles, np.int64),
         min_cluster_size=int(sel.min_cluster_size), output_names=diagram.output_names, settings=settings,
-        has_uncertainty=diagram.has_uncertainty, dropped_reason=tuple(sel.dropped_reason),
+        has_uncertainty=diagram.has_uncertainty,
         frequency_std_per_bandwidth=sel.frequency_std_per_bandwidth,
+        dropped_code=tuple(DropReason(c.name) for c in sel.dropped_code),
+        dropped_min_size=np.asarray(sel.dropped_min_size, np.int64),
+        dropped_first_order=np.asarray(sel.dropped_first_order, np.int64),
+        dropped_frequency_std_per_bandwidth=sel.dropped_frequency_std_per_bandwidth,
+        dropped_twin_mode=np.asarray(sel.dropped_twin_mode, np.int64),
+        dropped_twin_frequency_hz=sel.dropped_twin_frequency_hz, dropped_twin_mac=sel.dropped_twin_mac,
+        max_frequency_std_per_bandwidth=float(sel.max_frequency_std_per_bandwidth),
+        frequency_damping_correlation=sel.frequency_damping_correlation,
+        block_too_short=np.asarray(sel.block_too_short, bool),
     )
+    # the words from the codes and numbers (the core's own words are for its C++ users)
+    reasons = tuple(dropped_reason_text(modes, k) for k in range(len(modes.dropped_code)))
+    return dataclasses.replace(modes, dropped_reason=reasons)

@@ -114,6 +114,12 @@ class Diagram:
     #: :func:`modaluq.select_modes` clusters. ``None`` for a Diagram made otherwise (constructed,
     #: copied or unpickled): make it again with :func:`stabilization_diagram` to select modes.
     _core_diagram: object = field(default=None, init=False, repr=False, compare=False)
+    #: (n_poles,) correlation of f and ξ of each pole (``Modes.frequency_damping_correlation``; NaN
+    #: without uncertainty); empty when unknown
+    frequency_damping_correlation: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    #: (n_poles,) bool, the blocks are shorter than half the pole's decay time (``Modes.block_too_short``);
+    #: empty when unknown
+    block_too_short: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
 
     @property
     def n_poles(self) -> int:
@@ -269,6 +275,7 @@ def stabilization_diagram(result, criteria: StabilityCriteria | None = None, *,
         noise_coupled=np.asarray(p.noise_coupled, bool), orders=tuple(int(o) for o in p.orders),
         fs=float(result.fs), output_names=names, criteria=criteria, has_uncertainty=has_std,
         result_settings=dict(result.settings),
+        frequency_damping_correlation=p.frequency_damping_correlation, block_too_short=p.block_too_short,
     )
     object.__setattr__(diagram, "_core_diagram", d)
     return diagram
@@ -304,6 +311,14 @@ def _poles_of_modes(result, has_std: bool):
     p.close_singular_values = per_pole([np.full(m.n_modes, m.close_singular_values) for m in modes], bool)
     p.noise_coupled = per_pole([np.zeros(m.n_modes, bool) if m.noise_coupled is None else m.noise_coupled
                                 for m in modes], bool)
+    # as poles_of: empty when unknown (a Result made before these fields); NaN/False without uncertainty
+    rho = [getattr(m, "frequency_damping_correlation", None) for m in modes]
+    slow = [getattr(m, "block_too_short", None) for m in modes]
+    if all(r is not None for r in rho):
+        p.frequency_damping_correlation = per_pole([r if has_std else np.full(m.n_modes, np.nan)
+                                                    for r, m in zip(rho, modes)])
+    if all(b is not None for b in slow):
+        p.block_too_short = per_pole([b if has_std else np.zeros(m.n_modes, bool) for b, m in zip(slow, modes)], bool)
     p.orders = [int(m.order) for m in result.modes]
     p.has_uncertainty = bool(has_std)
     return p

@@ -93,6 +93,8 @@ TEST_CASE("a rank-deficient input covariance is reported, not silently used") {
     CHECK(id.input_rank_deficient);
     CHECK(id.input_rank == 4);
     CHECK_FALSE(id.warnings.empty());
+    REQUIRE(id.warning_codes.size() == id.warnings.size());
+    CHECK(id.warning_codes[0] == modaluq::IdentificationWarning::input_rank_deficient);
     MatrixXd uc = MatrixXd::Constant(1, s.u.cols(), 2.5);  // constant input: zero after demeaning
     const auto id2 = modaluq::identify(s.y, uc, options(s.fs, 4, 4, {4}));
     CHECK(id2.input_rank_deficient);
@@ -131,4 +133,79 @@ TEST_CASE("identify errors name the argument and the rule") {
                          invalid_argument);
     const auto id = modaluq::identify(s.y, s.u, options(20, 4, 4, {4}));
     CHECK_THROWS_WITH_AS(id.at_order(6), doctest::Contains("order 6 was not identified"), invalid_argument);
+}
+
+TEST_CASE("the slow-decay finding is reported in numbers, each warning with its code") {
+    // 2-DOF chain (1.3 and 2.8 Hz), 300 s at 20 Hz, output-only
+    auto run = [](double xi, Index n_blocks) {
+        const Sim s = simulate(2, {0, 1}, 6000, 5, false, 1.0, 0.05, 20.0, false, 1.0, xi);
+        return std::make_pair(s.fs, modaluq::identify(s.y, MatrixXd(), options(s.fs, 4, 4, {4}, true, n_blocks)));
+    };
+    auto check_numbers = [](double fs, const modaluq::Identification& id) {
+        const modaluq::SlowDecay& slow = id.slow_decay;
+        Index n = 0;
+        double longest = 0.0;
+        for (const auto& m : id.modes)
+            for (Index i = 0; i < m.n_modes(); ++i)
+                if (m.block_too_short(i)) {
+                    ++n;
+                    longest = std::max(longest, 1.0 / (2.0 * modaluq::detail::pi * m.frequency_hz(i) * m.damping_ratio(i)));
+                }
+        CHECK(slow.n_poles == n);
+        CHECK(slow.longest_decay_s == longest);
+        CHECK(slow.block_seconds == double(id.block_length) / fs);
+        CHECK(slow.record_seconds == double(id.n_columns) / fs);
+        REQUIRE(id.warning_codes.size() == id.warnings.size());
+        Index coded = 0;
+        for (std::size_t k = 0; k < id.warnings.size(); ++k) {
+            const bool is_slow = id.warning_codes[k] == modaluq::IdentificationWarning::slow_decay;
+            CHECK(is_slow == (id.warnings[k].find("decay more slowly than the blocks are long") != std::string::npos));
+            coded += is_slow;
+        }
+        CHECK(coded == (n > 0 ? 1 : 0));
+        if (n > 0) CHECK(slow.fitting_n_blocks == Index(slow.record_seconds / (0.5 * longest)));
+    };
+    // blocks of 30 s against half decay times of 3 s and 1.4 s: nothing slow
+    const auto [fs, long_blocks] = run(0.02, 10);
+    check_numbers(fs, long_blocks);
+    CHECK(long_blocks.slow_decay.n_poles == 0);
+    // blocks of 1.5 s: the 1.3 Hz mode is slow; 300 s hold 100 blocks of half its decay time
+    const auto short_blocks = run(0.02, 200).second;
+    check_numbers(fs, short_blocks);
+    CHECK(short_blocks.slow_decay.n_poles == 1);
+    CHECK_FALSE(short_blocks.slow_decay.record_too_short());
+    CHECK(short_blocks.warnings.back().find(
+              "use n_blocks <= " + std::to_string(short_blocks.slow_decay.fitting_n_blocks)) != std::string::npos);
+    // xi = 0.02 %: half the decay time of the 1.3 Hz mode is longer than the record
+    const auto too_short = run(0.0002, 10).second;
+    check_numbers(fs, too_short);
+    CHECK(too_short.slow_decay.n_poles >= 1);
+    CHECK(too_short.slow_decay.record_too_short());
+    CHECK(too_short.warnings.back().find("the record is too short") != std::string::npos);
+}
+
+TEST_CASE("each mode's f-xi correlation comes from its covariance") {
+    const Sim s = simulate(3, {0, 1, 2}, 6000, 21, true, 0.2, 0.05);
+    const auto id = modaluq::identify(s.y, s.u, options(s.fs, 5, 6, {2, 4, 6, 8, 10}, true));
+    for (const auto& m : id.modes) {
+        REQUIRE(m.frequency_damping_correlation.size() == m.n_modes());
+        const Index np = 2 + 2 * m.mode_shape.rows();
+        for (Index i = 0; i < m.n_modes(); ++i) {
+            const Eigen::Map<const MatrixXd> cov(m.covariance.col(i).data(), np, np);
+            CHECK(m.frequency_damping_correlation(i) == cov(1, 0) / std::sqrt(cov(0, 0) * cov(1, 1)));
+            CHECK(std::abs(m.frequency_damping_correlation(i)) <= 1.0 + 1e-12);
+        }
+    }
+    // the flattened poles carry it and the block-length flag
+    const modaluq::Poles p = modaluq::poles_of(id);
+    Index at = 0;
+    for (const auto& m : id.modes)
+        for (Index i = 0; i < m.n_modes(); ++i, ++at) {
+            CHECK(p.frequency_damping_correlation(at) == m.frequency_damping_correlation(i));
+            CHECK(p.block_too_short(at) == m.block_too_short(i));
+        }
+    // without uncertainty: NaN
+    const auto plain = modaluq::poles_of(modaluq::identify(s.y, s.u, options(s.fs, 5, 6, {4}, false)));
+    CHECK(plain.frequency_damping_correlation.size() == plain.size());
+    CHECK(plain.frequency_damping_correlation.array().isNaN().all());
 }

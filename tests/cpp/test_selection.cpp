@@ -89,6 +89,16 @@ TEST_CASE("selection: clusters, one pole per order, minimum size, representative
     REQUIRE(s.dropped_n_poles.size() == 1);
     CHECK(s.dropped_n_poles(0) == 2);
     CHECK(s.dropped_frequency_hz(0) == doctest::Approx(33.0));
+    // the reason as a code and the numbers its words quote
+    REQUIRE(s.dropped_code.size() == 1);
+    CHECK(s.dropped_code[0] == modaluq::DropReason::too_few_poles);
+    CHECK(s.dropped_min_size(0) == 5);
+    CHECK(s.dropped_first_order(0) == 20);
+    CHECK(s.dropped_twin_mode(0) == -1);
+    CHECK(std::isnan(s.dropped_twin_frequency_hz(0)));
+    CHECK(std::isnan(s.dropped_twin_mac(0)));
+    CHECK(s.dropped_reason[0] == "2 poles, fewer than 5");
+    CHECK(std::string(modaluq::to_string(s.dropped_code[0])) == "too_few_poles");
     // the sigma of mode 1 is the median of its members' sigma: 0.01 + 1e-4 n over n = 2..40
     CHECK(s.frequency_std(0) == doctest::Approx(0.01 + 1e-4 * 21.0));
     // the representative is never the noise-coupled pole, and its sigma excludes it
@@ -124,9 +134,17 @@ TEST_CASE("selection: a cluster whose frequency is less certain than its peak's 
     REQUIRE(s.dropped_reason.size() == 1);
     CHECK(s.dropped_frequency_hz(0) == doctest::Approx(12.0));
     CHECK(s.dropped_reason[0] == "frequency std 2 x the half-power bandwidth f xi (more than 1)");
+    REQUIRE(s.dropped_code.size() == 1);
+    CHECK(s.dropped_code[0] == modaluq::DropReason::frequency_std_above_bandwidth);
+    CHECK(s.dropped_frequency_std_per_bandwidth(0) == doctest::Approx(0.12 / (12.0 * 0.005)));
+    CHECK(s.max_frequency_std_per_bandwidth == 1.0);
+    CHECK(s.dropped_min_size(0) == 3);
+    CHECK(s.dropped_first_order(0) == 2);
+    CHECK(s.dropped_twin_mode(0) == -1);
     modaluq::ClusteringOptions o;
     o.max_frequency_std_per_bandwidth.reset();
     CHECK(modaluq::select_modes(d, o).n_modes() == 2);
+    CHECK(std::isnan(modaluq::select_modes(d, o).max_frequency_std_per_bandwidth));  // no such test
     o.max_frequency_std_per_bandwidth = 3.0;
     CHECK(modaluq::select_modes(d, o).n_modes() == 2);
     // a too-small cluster says so
@@ -136,6 +154,12 @@ TEST_CASE("selection: a cluster whose frequency is less certain than its peak's 
     CHECK(s.n_modes() == 0);
     REQUIRE(s.dropped_reason.size() == 2);
     CHECK(s.dropped_reason[0] == "10 poles, fewer than 11");
+    for (Index k = 0; k < 2; ++k) {  // the size test comes first; the bandwidth is still reported
+        CHECK(s.dropped_code[std::size_t(k)] == modaluq::DropReason::too_few_poles);
+        CHECK(s.dropped_min_size(k) == 11);
+        CHECK(s.dropped_n_poles(k) == 10);
+    }
+    CHECK(s.dropped_frequency_std_per_bandwidth(1) == doctest::Approx(2.0));
 }
 
 TEST_CASE("selection: the per-cluster minimum size counts the orders from the cluster's first order") {
@@ -202,9 +226,42 @@ TEST_CASE("selection: the later of two alike clusters a few per cent apart is dr
     CHECK(s.dropped_frequency_hz(0) == doctest::Approx(10.3));
     CHECK(s.dropped_reason[0] == "a twin of the 10 Hz mode: same shape (MAC 0.88), 3 % away, from order 20 "
                                  "(the mode from order 2)");
+    REQUIRE(s.dropped_code.size() == 1);
+    CHECK(s.dropped_code[0] == modaluq::DropReason::twin);
+    CHECK(s.dropped_twin_mode(0) == 0);  // the 10 Hz mode
+    CHECK(s.dropped_twin_frequency_hz(0) == 10.0);
+    const double mac = modaluq::detail::mac_pair(d.poles.mode_shape.col(0), d.poles.mode_shape.col(find(d, 20, 10.3)));
+    CHECK(s.dropped_twin_mac(0) == mac);
+    CHECK(s.dropped_first_order(0) == 20);
+    CHECK(s.order_min(s.dropped_twin_mode(0)) == 2);
+    CHECK(s.dropped_min_size(0) == 5);
     o.drop_doublets = false;
     CHECK(modaluq::select_modes(d, o).n_modes() == 3);
     o.drop_doublets = true;
     o.doublet_window = 0.02;
     CHECK(modaluq::select_modes(d, o).n_modes() == 3);
+}
+
+TEST_CASE("selection: each mode carries its representative pole's f-xi correlation and block-length flag") {
+    std::map<Index, std::vector<P>> by_order;
+    for (Index n = 2; n <= 20; n += 2) by_order[n] = {{5.0 + 1e-4 * double(n), 0.02, 0}, {12.0, 0.01, 1}};
+    modaluq::Diagram d = all_stable(by_order);
+    // unknown (poles without them): NaN and false
+    auto s = modaluq::select_modes(d);
+    REQUIRE(s.n_modes() == 2);
+    CHECK(std::isnan(s.frequency_damping_correlation(0)));
+    CHECK_FALSE(s.block_too_short.any());
+    const Index n = d.size();
+    d.poles.frequency_damping_correlation = Eigen::VectorXd::LinSpaced(n, -0.9, 0.9);
+    d.poles.block_too_short.setConstant(n, false);
+    for (Index i = 0; i < n; ++i) d.poles.block_too_short(i) = d.poles.frequency_hz(i) > 10.0;
+    s = modaluq::select_modes(d);
+    for (Index k = 0; k < 2; ++k) {
+        const Index rep = s.representative_pole(k);
+        CHECK(s.frequency_damping_correlation(k) == d.poles.frequency_damping_correlation(rep));
+        CHECK(s.block_too_short(k) == d.poles.block_too_short(rep));
+    }
+    CHECK(s.block_too_short(1));
+    d.poles.block_too_short.resize(3);  // neither empty nor one per pole
+    CHECK_THROWS_WITH_AS(d.poles.validate(), doctest::Contains("block_too_short"), modaluq::invalid_argument);
 }

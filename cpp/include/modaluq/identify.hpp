@@ -72,6 +72,30 @@ struct IdentifyOptions {
     }
 };
 
+/// What an entry of Identification::warnings is about; the flags and numbers it words are in
+/// the Identification (the words are for C++ users; Python words the numbers itself).
+enum class IdentificationWarning : int {
+    input_rank_deficient = 0,  ///< input_rank_deficient, input_rank
+    too_few_blocks = 1,        ///< too_few_blocks, n_blocks
+    low_signal_to_noise = 2,   ///< low_signal_to_noise, signal_to_noise
+    degenerate_orders = 3,     ///< Modes::degenerate of some orders, numerical_rank
+    slow_decay = 4,            ///< slow_decay
+};
+
+/// Poles whose decay outlasts the blocks (Modes::block_too_short, over every order): their
+/// sigma are less reliable. n_poles 0: none (and no warning).
+struct SlowDecay {
+    Index n_poles = 0;               ///< poles flagged block_too_short, every order
+    double block_seconds = 0.0;      ///< length of one block N_b / fs, s
+    double longest_decay_s = 0.0;    ///< largest decay time 1/(2 pi f xi) of the flagged poles, s
+    double record_seconds = 0.0;     ///< the record's Hankel columns N / fs, s
+    /// record_seconds / (longest_decay_s / 2): the most blocks each as long as half the longest
+    /// decay time; below 2 the record is too short for these poles' decay.
+    Index fitting_n_blocks = 0;
+
+    bool record_too_short() const { return fitting_n_blocks < 2; }
+};
+
 /// Everything an identification returns.
 struct Identification {
     std::vector<Modes> modes;            ///< one entry per requested order, ascending order
@@ -94,7 +118,15 @@ struct Identification {
     /// estimation error of their trailing block; an estimate of the model order. At most the
     /// largest order + 1 (that value also means "none below"). 0 without uncertainty.
     Index significant_singular_values = 0;
+    SlowDecay slow_decay;                ///< poles decaying more slowly than the blocks are long
     std::vector<std::string> warnings;   ///< what the flags above mean for this run, in words
+    std::vector<IdentificationWarning> warning_codes;  ///< per entry of warnings, what it is about
+
+    /// Add a warning and its code.
+    void warn(IdentificationWarning code, std::string text) {
+        warning_codes.push_back(code);
+        warnings.push_back(std::move(text));
+    }
 
     /// The modes at model order n (throws invalid_argument if n was not requested).
     const Modes& at_order(Index n) const {
@@ -132,6 +164,7 @@ inline Modes degenerate_modes(Index order, Index n_outputs, bool with_uncertaint
         m.mode_shape_std_imag.resize(n_outputs, 0);
         m.covariance.resize(np * np, 0);
         m.block_too_short.resize(0);
+        m.frequency_damping_correlation.resize(0);
         m.noise_coupling.resize(0);
         m.noise_coupled.resize(0);
     }
@@ -158,7 +191,7 @@ inline Identification identify_with_factor(const Covariances& cov, Eigen::Matrix
         out.input_condition = sub.input_condition;
         out.input_rank_deficient = sub.input_rank_deficient;
         if (sub.input_rank_deficient)
-            out.warnings.push_back(detail::concat(
+            out.warn(IdentificationWarning::input_rank_deficient, detail::concat(
                 "the input covariance R3 is rank deficient (rank ", sub.input_rank, " of ", L.rows_input(),
                 "): inputs are constant, duplicated or not exciting enough for block_rows = ", L.p(),
                 "; their effect was removed only in the subspace they span and the uncertainty is not reliable"));
@@ -188,7 +221,7 @@ inline Identification identify_with_factor(const Covariances& cov, Eigen::Matrix
         block_seconds = static_cast<double>(cov.block_length) / options.fs;
         out.too_few_blocks = out.n_blocks - 1 < 2 + 2 * L.n_outputs;
         if (out.too_few_blocks)
-            out.warnings.push_back(detail::concat(
+            out.warn(IdentificationWarning::too_few_blocks, detail::concat(
                 "n_blocks = ", out.n_blocks, " is too few for the joint covariance of the ", 2 + 2 * L.n_outputs,
                 " parameters of a mode: use n_blocks >= ", 3 + 2 * L.n_outputs,
                 " (the standard deviations of f and xi alone are still estimated, but from few blocks)"));
@@ -205,7 +238,7 @@ inline Identification identify_with_factor(const Covariances& cov, Eigen::Matrix
         // dynamics can fall below it by chance (H numerically zero is refused above).
         out.low_signal_to_noise = out.signal_to_noise < kMinSignalToNoise;
         if (out.low_signal_to_noise)
-            out.warnings.push_back(detail::concat(
+            out.warn(IdentificationWarning::low_signal_to_noise, detail::concat(
                 "the subspace matrix H is at the level of its own estimation noise (its largest singular value is ",
                 out.signal_to_noise, " standard deviations from zero, fewer than ", kMinSignalToNoise,
                 "): the modes cannot be told from noise; use a longer record or check the channels "
@@ -238,28 +271,29 @@ inline Identification identify_with_factor(const Covariances& cov, Eigen::Matrix
     if (!degenerate.empty()) {
         std::ostringstream list;
         for (size_t i = 0; i < degenerate.size(); ++i) list << (i ? ", " : "") << degenerate[i];
-        out.warnings.push_back(detail::concat(
+        out.warn(IdentificationWarning::degenerate_orders, detail::concat(
             "no modes at order(s) ", list.str(), ": above the numerical rank of H (", re.numerical_rank(),
             ") or no usable eigen-decomposition of A there; use orders <= ", re.max_order()));
     }
-    Index short_blocks = 0;
-    double longest_decay_s = 0.0;  // of the flagged poles: what the blocks should cover
+    SlowDecay& slow = out.slow_decay;
+    slow.block_seconds = block_seconds;
+    slow.record_seconds = static_cast<double>(cov.n_columns) / options.fs;
     for (const Modes& m : out.modes)
         for (Index i = 0; i < m.block_too_short.size(); ++i)
             if (m.block_too_short(i)) {
-                ++short_blocks;
-                longest_decay_s = std::max(longest_decay_s,
-                                           1.0 / (2.0 * detail::pi * m.frequency_hz(i) * m.damping_ratio(i)));
+                ++slow.n_poles;
+                slow.longest_decay_s = std::max(slow.longest_decay_s,
+                                                1.0 / (2.0 * detail::pi * m.frequency_hz(i) * m.damping_ratio(i)));
             }
-    if (short_blocks > 0) {
-        const double record_s = static_cast<double>(cov.n_columns) / options.fs;
-        const Index fitting = static_cast<Index>(record_s / (0.5 * longest_decay_s));
-        out.warnings.push_back(detail::concat(
-            short_blocks, " pole(s) decay more slowly than the blocks are long (blocks of ", block_seconds,
-            " s, less than half of the decay time 1/(2 pi f xi), up to ", longest_decay_s,
+    if (slow.n_poles > 0) {
+        slow.fitting_n_blocks = static_cast<Index>(slow.record_seconds / (0.5 * slow.longest_decay_s));
+        out.warn(IdentificationWarning::slow_decay, detail::concat(
+            slow.n_poles, " pole(s) decay more slowly than the blocks are long (blocks of ", block_seconds,
+            " s, less than half of the decay time 1/(2 pi f xi), up to ", slow.longest_decay_s,
             " s); their standard deviations are less reliable: ",
-            fitting >= 2 ? detail::concat("use n_blocks <= ", fitting)
-                         : std::string("the record is too short for these poles' decay (a longer record is needed)")));
+            !slow.record_too_short()
+                ? detail::concat("use n_blocks <= ", slow.fitting_n_blocks)
+                : std::string("the record is too short for these poles' decay (a longer record is needed)")));
     }
     return out;
 }

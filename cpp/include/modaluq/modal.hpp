@@ -36,6 +36,9 @@ struct Modes {
     /// (2 + 2l)^2 x n_modes; column i is mode i's covariance of [f, xi, Re shape, Im shape]
     /// (symmetric, so row- and column-major readings agree).
     Eigen::MatrixXd covariance;
+    /// Per mode, the correlation of f and xi, cov(f, xi) / sqrt(var f var xi) from `covariance`
+    /// (NaN where a variance is 0).
+    Eigen::VectorXd frequency_damping_correlation;
     /// Per mode: the block is shorter than half the mode's decay time constant
     /// 1/(2 pi f xi), so the blocks are not independent enough for its covariance (docs/uq-math.md §10.7).
     Eigen::Array<bool, Eigen::Dynamic, 1> block_too_short;

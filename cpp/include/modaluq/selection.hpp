@@ -83,6 +83,29 @@ struct ClusteringOptions {
     }
 };
 
+/// Why select_modes dropped a cluster; the numbers behind each are in SelectedModes::dropped_*.
+enum class DropReason : int {
+    /// fewer poles (one per order) than the minimum size: dropped_n_poles < dropped_min_size
+    too_few_poles = 0,
+    /// median sigma_f / (f xi) above the limit: dropped_frequency_std_per_bandwidth >
+    /// max_frequency_std_per_bandwidth (the frequency is less certain than the peak's half-power
+    /// bandwidth)
+    frequency_std_above_bandwidth = 1,
+    /// a twin of a kept mode (ClusteringOptions::drop_doublets): dropped_twin_mode, its median
+    /// frequency dropped_twin_frequency_hz, the MAC dropped_twin_mac, first orders
+    /// dropped_first_order and order_min of the mode
+    twin = 2,
+};
+
+inline const char* to_string(DropReason r) {
+    switch (r) {
+        case DropReason::too_few_poles: return "too_few_poles";
+        case DropReason::frequency_std_above_bandwidth: return "frequency_std_above_bandwidth";
+        case DropReason::twin: return "twin";
+    }
+    return "?";
+}
+
 /// Modes chosen from a Diagram, sorted by frequency. f, xi and the shape are those of one
 /// representative pole; frequency_std and damping_std are the median over the cluster's
 /// reliable poles (not at a close cut, not noise-coupled); *_spread is the sample std (ddof 1)
@@ -108,10 +131,26 @@ struct SelectedModes {
     IndexVector mode_of_pole;               ///< per diagram pole, its mode, -1 if none
     Eigen::VectorXd dropped_frequency_hz;   ///< median frequency of each dropped cluster, Hz
     IndexVector dropped_n_poles;            ///< size of each dropped cluster
-    std::vector<std::string> dropped_reason;  ///< why each cluster was dropped, in words
+    std::vector<std::string> dropped_reason;  ///< why each cluster was dropped, in words (for C++ users)
+    std::vector<DropReason> dropped_code;   ///< why each cluster was dropped
+    IndexVector dropped_min_size;           ///< the minimum size that applied to each dropped cluster
+    IndexVector dropped_first_order;        ///< lowest order of each dropped cluster
+    /// median sigma_f / (f xi) of each dropped cluster (NaN where not judged: no uncertainty or no limit)
+    Eigen::VectorXd dropped_frequency_std_per_bandwidth;
+    IndexVector dropped_twin_mode;          ///< DropReason::twin: the mode (index into these) it twins, else -1
+    Eigen::VectorXd dropped_twin_frequency_hz;  ///< DropReason::twin: that mode's median frequency, Hz, else NaN
+    Eigen::VectorXd dropped_twin_mac;       ///< DropReason::twin: MAC between the two shapes, else NaN
     /// per mode, median sigma_f / (f xi) over its cluster (NaN without uncertainty)
     Eigen::VectorXd frequency_std_per_bandwidth;
+    /// per mode, the correlation of f and xi of the representative pole (Poles::frequency_damping_correlation;
+    /// NaN without uncertainty or when the poles do not carry it)
+    Eigen::VectorXd frequency_damping_correlation;
+    /// per mode, the representative pole's blocks are shorter than half its decay time
+    /// (Modes::block_too_short): its sigma are less reliable
+    BoolArray block_too_short;
     Index min_cluster_size = 0;             ///< the size threshold applied (the smallest, per cluster)
+    /// the limit on sigma_f / (f xi) applied (NaN: no such test, or no uncertainty)
+    double max_frequency_std_per_bandwidth = std::numeric_limits<double>::quiet_NaN();
 
     Index n_modes() const { return frequency_hz.size(); }
 };
@@ -192,10 +231,23 @@ std::vector<std::vector<Index>> merge_fragments(std::vector<std::vector<Index>> 
     return clusters;
 }
 
+/// A cluster drop_doublets dropped: its median frequency, size and first order, its index in
+/// the clusters given (`at`), and the kept twin's index in the clusters returned, median
+/// frequency, first order and MAC.
+struct DoubletDrop {
+    double f;
+    Index n, first;
+    std::size_t at, twin;
+    double twin_f;
+    Index twin_first;
+    double mac;
+    std::string reason;
+};
+
 /// ClusteringOptions::drop_doublets on the kept clusters (each one pole per order): in order of
 /// first order, then size (larger first), then first pole, a cluster is dropped when an
 /// earlier kept one lies within doublet_window in frequency with MAC >= doublet_min_mac between
-/// the poles nearest to the two medians. `drop(f, n, reason)` records each.
+/// the poles nearest to the two medians. `drop(DoubletDrop)` records each.
 template <class Drop>
 std::vector<std::vector<Index>> drop_doublets(std::vector<std::vector<Index>> kept, const Poles& P,
                                               const ClusteringOptions& o, const Drop& drop) {
@@ -228,17 +280,20 @@ std::vector<std::vector<Index>> drop_doublets(std::vector<std::vector<Index>> ke
     for (const Item& it : items) {
         const Item* twin = nullptr;
         double twin_mac = 0.0;
-        for (const Item& s : survivors) {
+        std::size_t twin_at = 0;  // in survivors, which is in out
+        for (std::size_t k = 0; k < survivors.size(); ++k) {
+            const Item& s = survivors[k];
             if (std::abs(it.f - s.f) / std::max(it.f, s.f) > o.doublet_window) continue;
             const double m = mac_pair(P.mode_shape.col(it.rep), P.mode_shape.col(s.rep));
-            if (m >= o.doublet_min_mac) { twin = &s; twin_mac = m; break; }
+            if (m >= o.doublet_min_mac) { twin = &s; twin_mac = m; twin_at = k; break; }
         }
         if (twin) {
-            drop(it.f, it.n,
-                 "a twin of the " + format_number("%.4g", twin->f) + " Hz mode: same shape (MAC " +
-                     format_number("%.2f", twin_mac) + "), " + percent(std::abs(it.f - twin->f) / twin->f) +
-                     " away, from order " + std::to_string(it.first) + " (the mode from order " +
-                     std::to_string(twin->first) + ")");
+            drop(DoubletDrop{it.f, it.n, it.first, it.at, twin_at, twin->f, twin->first, twin_mac,
+                             "a twin of the " + format_number("%.4g", twin->f) + " Hz mode: same shape (MAC " +
+                                 format_number("%.2f", twin_mac) + "), " +
+                                 percent(std::abs(it.f - twin->f) / twin->f) + " away, from order " +
+                                 std::to_string(it.first) + " (the mode from order " +
+                                 std::to_string(twin->first) + ")"});
         } else {
             survivors.push_back(it);
             out.push_back(std::move(kept[it.at]));
@@ -323,10 +378,16 @@ inline SelectedModes select_modes(const Diagram& diagram, const ClusteringOption
     const bool check_bandwidth = options.max_frequency_std_per_bandwidth && P.has_uncertainty;
     Index smallest_min_size = min_size;
     std::vector<std::vector<Index>> kept;
+    const double nan = std::numeric_limits<double>::quiet_NaN();
     struct Dropped {
         double f;
         Index n;
         std::string reason;
+        DropReason code;
+        Index min_size, first;
+        double std_per_bandwidth;
+        std::size_t twin = 0;  // DropReason::twin: index into kept after drop_doublets
+        double twin_f, twin_mac;
         bool operator<(const Dropped& o) const { return f < o.f || (f == o.f && n < o.n); }
     };
     std::vector<Dropped> dropped;
@@ -346,43 +407,57 @@ inline SelectedModes select_modes(const Diagram& diagram, const ClusteringOption
         return one_per_order;
     };
     if (options.merge_fragments && P.has_uncertainty) clusters = detail::merge_fragments(clusters, P, thin, options);
+    std::vector<Index> kept_need;    // per kept cluster, the minimum size that applied
+    std::vector<double> kept_q;      // and its median sigma_f / (f xi) (NaN: not judged)
     for (const std::vector<Index>& all : clusters) {
         const std::vector<Index> one_per_order = thin(all);
         const Index size = Index(one_per_order.size());
+        Index first = P.order(one_per_order.front());
+        for (Index i : one_per_order) first = std::min(first, P.order(i));
         Index need = min_size;
         if (options.min_cluster_size == 0 && options.per_cluster_min_size) {
-            Index first = P.order(one_per_order.front());
-            for (Index i : one_per_order) first = std::min(first, P.order(i));
             need = min_size_from(first);
             smallest_min_size = std::min(smallest_min_size, need);
         }
         const double q = check_bandwidth ? std_per_bandwidth(one_per_order) : 0.0;
+        const double q_reported = check_bandwidth ? q : nan;
         if (size < need)
             dropped.push_back({median_f(one_per_order), size,
                                std::to_string(size) + (size == 1 ? " pole" : " poles") + ", fewer than " +
-                                   std::to_string(need)});
+                                   std::to_string(need),
+                               DropReason::too_few_poles, need, first, q_reported, 0, nan, nan});
         else if (check_bandwidth && !(q <= *options.max_frequency_std_per_bandwidth))
             dropped.push_back({median_f(one_per_order), size,
                                "frequency std " + detail::format_number("%.3g", q) +
                                    " x the half-power bandwidth f xi (more than " +
-                                   detail::format_number("%g", *options.max_frequency_std_per_bandwidth) + ")"});
-        else
+                                   detail::format_number("%g", *options.max_frequency_std_per_bandwidth) + ")",
+                               DropReason::frequency_std_above_bandwidth, need, first, q_reported, 0, nan, nan});
+        else {
             kept.push_back(std::move(one_per_order));
+            kept_need.push_back(need);
+            kept_q.push_back(q_reported);
+        }
     }
     if (options.drop_doublets)
-        kept = detail::drop_doublets(std::move(kept), P, options,
-                                     [&](double f0, Index n, std::string why) { dropped.push_back({f0, n, std::move(why)}); });
+        kept = detail::drop_doublets(std::move(kept), P, options, [&](detail::DoubletDrop d) {
+            dropped.push_back({d.f, d.n, std::move(d.reason), DropReason::twin, kept_need[d.at], d.first,
+                               kept_q[d.at], d.twin, d.twin_f, d.mac});
+        });
     std::vector<double> kept_median;
     for (const auto& k : kept) kept_median.push_back(median_f(k));
     std::vector<std::size_t> by_f(kept.size());
     for (std::size_t k = 0; k < by_f.size(); ++k) by_f[k] = k;
     std::stable_sort(by_f.begin(), by_f.end(), [&](std::size_t a, std::size_t b) { return kept_median[a] < kept_median[b]; });
+    std::vector<Index> mode_of_kept(kept.size());
+    for (std::size_t k = 0; k < by_f.size(); ++k) mode_of_kept[by_f[k]] = Index(k);
     std::sort(dropped.begin(), dropped.end());
 
     const Index l = P.mode_shape.rows(), nm = Index(kept.size());
-    const double nan = std::numeric_limits<double>::quiet_NaN();
     SelectedModes s;
     s.min_cluster_size = smallest_min_size;
+    if (check_bandwidth) s.max_frequency_std_per_bandwidth = *options.max_frequency_std_per_bandwidth;
+    s.frequency_damping_correlation.setConstant(nm, nan);
+    s.block_too_short.setConstant(nm, false);
     s.frequency_std_per_bandwidth.setConstant(nm, nan);
     s.frequency_hz.resize(nm);
     s.damping_ratio.resize(nm);
@@ -466,6 +541,9 @@ inline SelectedModes select_modes(const Diagram& diagram, const ClusteringOption
         if (P.has_uncertainty) s.frequency_std_per_bandwidth(k) = std_per_bandwidth(members);
         s.frequency_hz(k) = f(rep);
         s.damping_ratio(k) = xi(rep);
+        if (P.frequency_damping_correlation.size() == n)
+            s.frequency_damping_correlation(k) = P.frequency_damping_correlation(rep);
+        if (P.block_too_short.size() == n) s.block_too_short(k) = P.block_too_short(rep);
         s.mode_shape.col(k) = P.mode_shape.col(rep);
         s.mode_shape_std_real.col(k) = P.mode_shape_std_real.col(rep);
         s.mode_shape_std_imag.col(k) = P.mode_shape_std_imag.col(rep);
@@ -476,12 +554,27 @@ inline SelectedModes select_modes(const Diagram& diagram, const ClusteringOption
         s.order_max(k) = P.order(members.back());
         s.members.push_back(std::move(members));
     }
-    s.dropped_frequency_hz.resize(Index(dropped.size()));
-    s.dropped_n_poles.resize(Index(dropped.size()));
-    for (std::size_t k = 0; k < dropped.size(); ++k) {
-        s.dropped_frequency_hz(Index(k)) = dropped[k].f;
-        s.dropped_n_poles(Index(k)) = dropped[k].n;
-        s.dropped_reason.push_back(dropped[k].reason);
+    const Index nd = Index(dropped.size());
+    s.dropped_frequency_hz.resize(nd);
+    s.dropped_n_poles.resize(nd);
+    s.dropped_min_size.resize(nd);
+    s.dropped_first_order.resize(nd);
+    s.dropped_frequency_std_per_bandwidth.resize(nd);
+    s.dropped_twin_mode.resize(nd);
+    s.dropped_twin_frequency_hz.resize(nd);
+    s.dropped_twin_mac.resize(nd);
+    for (Index k = 0; k < nd; ++k) {
+        const Dropped& d = dropped[std::size_t(k)];
+        s.dropped_frequency_hz(k) = d.f;
+        s.dropped_n_poles(k) = d.n;
+        s.dropped_reason.push_back(d.reason);
+        s.dropped_code.push_back(d.code);
+        s.dropped_min_size(k) = d.min_size;
+        s.dropped_first_order(k) = d.first;
+        s.dropped_frequency_std_per_bandwidth(k) = d.std_per_bandwidth;
+        s.dropped_twin_mode(k) = d.code == DropReason::twin ? mode_of_kept[d.twin] : -1;
+        s.dropped_twin_frequency_hz(k) = d.twin_f;
+        s.dropped_twin_mac(k) = d.twin_mac;
     }
     return s;
 }

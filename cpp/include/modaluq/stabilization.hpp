@@ -106,6 +106,11 @@ struct Poles {
     Eigen::MatrixXd mode_shape_std_imag; ///< l x n_poles
     BoolArray close_singular_values;     ///< the pole's order cuts close significant singular values
     BoolArray noise_coupled;             ///< no first-order sigma (docs/uq-math.md §5.5)
+    /// Modes::frequency_damping_correlation of each pole (NaN without uncertainty); may be empty
+    /// (unknown: SelectedModes reports NaN).
+    Eigen::VectorXd frequency_damping_correlation;
+    /// Modes::block_too_short of each pole; may be empty (unknown: taken as false).
+    BoolArray block_too_short;
     std::vector<Index> orders;           ///< identified orders, ascending (an order may hold no pole)
     bool has_uncertainty = true;         ///< the std fields are estimates (false: all NaN)
 
@@ -117,6 +122,10 @@ struct Poles {
                             damping_std.size() == n && close_singular_values.size() == n &&
                             noise_coupled.size() == n,
                         "poles: every per-pole array must have ", n, " entries");
+        detail::require((frequency_damping_correlation.size() == 0 || frequency_damping_correlation.size() == n) &&
+                            (block_too_short.size() == 0 || block_too_short.size() == n),
+                        "poles: frequency_damping_correlation and block_too_short must be empty or have ", n,
+                        " entries");
         detail::require(mode_shape.cols() == n && mode_shape_std_real.cols() == n &&
                             mode_shape_std_imag.cols() == n && mode_shape_std_real.rows() == mode_shape.rows() &&
                             mode_shape_std_imag.rows() == mode_shape.rows(),
@@ -153,6 +162,8 @@ inline Poles poles_of(const Identification& id) {
     p.mode_shape_std_imag.setConstant(l, n, nan);
     p.close_singular_values.setConstant(n, false);
     p.noise_coupled.setConstant(n, false);
+    p.frequency_damping_correlation.setConstant(n, nan);
+    p.block_too_short.setConstant(n, false);
     Index at = 0;
     for (const Modes& m : id.modes) {
         p.orders.push_back(m.order);
@@ -169,6 +180,9 @@ inline Poles poles_of(const Identification& id) {
             p.mode_shape_std_real.middleCols(at, k) = m.mode_shape_std_real;
             p.mode_shape_std_imag.middleCols(at, k) = m.mode_shape_std_imag;
             if (m.noise_coupled.size() == k) p.noise_coupled.segment(at, k) = m.noise_coupled;
+            if (m.frequency_damping_correlation.size() == k)
+                p.frequency_damping_correlation.segment(at, k) = m.frequency_damping_correlation;
+            if (m.block_too_short.size() == k) p.block_too_short.segment(at, k) = m.block_too_short;
         }
         at += k;
     }

@@ -87,6 +87,7 @@ public:
         modes.mode_shape_std_imag.resize(l, nm);
         modes.covariance.resize(np * np, nm);
         modes.block_too_short.resize(nm);
+        modes.frequency_damping_correlation.resize(nm);
         modes.noise_coupling = Eigen::VectorXd::Ones(nm);
         modes.noise_coupled = Eigen::Array<bool, Eigen::Dynamic, 1>::Constant(nm, false);
 
@@ -135,6 +136,9 @@ public:
             const Eigen::VectorXd sd = cov.diagonal().cwiseMax(0.0).cwiseSqrt();
             modes.frequency_std(i) = sd(0);
             modes.damping_std(i) = sd(1);
+            modes.frequency_damping_correlation(i) = cov(0, 0) > 0.0 && cov(1, 1) > 0.0
+                                                         ? cov(1, 0) / std::sqrt(cov(0, 0) * cov(1, 1))
+                                                         : std::numeric_limits<double>::quiet_NaN();
             modes.mode_shape_std_real.col(i) = sd.segment(2, l);
             modes.mode_shape_std_imag.col(i) = sd.segment(2 + l, l);
             const double decay_s = 1.0 / (2.0 * detail::pi * modes.frequency_hz(i) * modes.damping_ratio(i));
