@@ -311,14 +311,17 @@ def _poles_of_modes(result, has_std: bool):
     p.close_singular_values = per_pole([np.full(m.n_modes, m.close_singular_values) for m in modes], bool)
     p.noise_coupled = per_pole([np.zeros(m.n_modes, bool) if m.noise_coupled is None else m.noise_coupled
                                 for m in modes], bool)
-    # as poles_of: empty when unknown (a Result made before these fields); NaN/False without uncertainty
+    # as poles_of: NaN / False without uncertainty; empty when unknown (a Result made without them)
     rho = [getattr(m, "frequency_damping_correlation", None) for m in modes]
     slow = [getattr(m, "block_too_short", None) for m in modes]
-    if all(r is not None for r in rho):
-        p.frequency_damping_correlation = per_pole([r if has_std else np.full(m.n_modes, np.nan)
-                                                    for r, m in zip(rho, modes)])
-    if all(b is not None for b in slow):
-        p.block_too_short = per_pole([b if has_std else np.zeros(m.n_modes, bool) for b, m in zip(slow, modes)], bool)
+    if not has_std:
+        p.frequency_damping_correlation = per_pole([np.full(m.n_modes, np.nan) for m in modes])
+        p.block_too_short = per_pole([np.zeros(m.n_modes, bool) for m in modes], bool)
+    else:
+        if all(r is not None for r in rho):
+            p.frequency_damping_correlation = per_pole(rho)
+        if all(b is not None for b in slow):
+            p.block_too_short = per_pole(slow, bool)
     p.orders = [int(m.order) for m in result.modes]
     p.has_uncertainty = bool(has_std)
     return p

@@ -24,9 +24,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.cluster.hierarchy
 import scipy.optimize
 
+from .. import _core
 from ..checks import check_boolean, check_integer, check_real
 from ..stabilization import modal_assurance_criterion
 
@@ -180,9 +180,10 @@ def reference_modes(records: list, settings: TrackingSettings | None = None) -> 
     else:
         mac = modal_assurance_criterion(shapes, shapes)
         d = np.abs(f[:, None] - f[None, :]) / np.maximum(f[:, None], f[None, :]) + (1.0 - mac)
-        np.fill_diagonal(d, 0.0)
-        tree = scipy.cluster.hierarchy.linkage(scipy.spatial.distance.squareform(d, checks=False), "average")
-        labels = scipy.cluster.hierarchy.fcluster(tree, s.reference_distance, criterion="distance")
+        d = np.triu(d, 1)
+        d = d + d.T  # the upper triangle, mirrored: exactly symmetric, zero diagonal
+        # the core's clustering (selection.hpp's average linkage, cut at a height), as select_modes does
+        labels = _core.cluster_labels(d, _core.Linkage.average, float(s.reference_distance))
     out = []
     for label in np.unique(labels):
         idx = np.flatnonzero(labels == label)

@@ -23,7 +23,7 @@ from ..version import __version__
 from .executors import configure_worker_process
 from .records import RecordTask
 
-__all__ = ["TaskConfig", "frequency_damping_correlation", "process_record"]
+__all__ = ["TaskConfig", "process_record"]
 
 
 @dataclass(frozen=True)
@@ -94,32 +94,10 @@ def _analysis(task: RecordTask, config: TaskConfig) -> Analysis:
     return Analysis.from_arrays(rec.y, u, fs=rec.fs, output_names=names, **common)
 
 
-def frequency_damping_correlation(analysis: Analysis) -> np.ndarray:
-    """(m,) the correlation of f and ξ at each selected mode's representative pole (NaN without
-    uncertainty), found again in the :class:`~modaluq.Result` at the pole's order: the pole's index
-    within its order, checked by its frequency. The core does not report it yet (issue 22)."""
-    sel, d, res = analysis.selected, analysis.diagram, analysis.result
-    m = sel.n_modes
-    rho = np.full(m, np.nan)
-    first_of_order = {o: int(np.flatnonzero(d.order == o)[0]) for o in np.unique(d.order)}
-    for i in range(m):
-        pole = int(sel.representative_pole[i])
-        order = int(d.order[pole])
-        modes = res.at_order(order)
-        j = pole - first_of_order[order]
-        if modes.covariance is not None and 0 <= j < modes.n_modes \
-                and np.isclose(modes.frequency_hz[j], d.frequency_hz[pole], rtol=1e-12):
-            c = modes.covariance[j]
-            if c[0, 0] > 0 and c[1, 1] > 0:
-                rho[i] = c[0, 1] / np.sqrt(c[0, 0] * c[1, 1])
-    return rho
-
-
 def _modes_of(analysis: Analysis) -> dict:
-    """The selected modes (with the f-ξ correlation of each representative pole) and their poles."""
+    """The selected modes (with the f-ξ correlation of each representative pole, the core's) and their poles."""
     sel, d, res = analysis.selected, analysis.diagram, analysis.result
     m = sel.n_modes
-    rho = frequency_damping_correlation(analysis)
     members = [np.asarray(mem, np.int64) for mem in sel.members]
     pole_mode = np.concatenate([np.full(len(mem), i + 1) for i, mem in enumerate(members)]) if m else np.zeros(0, int)
     pole_index = np.concatenate(members) if m else np.zeros(0, np.int64)
@@ -129,7 +107,7 @@ def _modes_of(analysis: Analysis) -> dict:
         "modes": {
             "frequency_hz": sel.frequency_hz, "damping_ratio": sel.damping_ratio,
             "frequency_std": sel.frequency_std, "damping_std": sel.damping_std,
-            "frequency_damping_correlation": rho, "mode_shape": sel.mode_shape,
+            "frequency_damping_correlation": sel.frequency_damping_correlation, "mode_shape": sel.mode_shape,
             "mode_shape_std_real": sel.mode_shape_std_real, "mode_shape_std_imag": sel.mode_shape_std_imag,
             "n_poles": sel.n_poles, "representative_order": sel.representative_order,
             "possible_harmonic": (analysis.possible_harmonic if analysis.possible_harmonic.size == m
