@@ -22,7 +22,7 @@ PYTHON = [
     ("selection", "selection"),
     ("plot and export", "plot · export"),
     ("settings, signal", "settings · preprocess · auto_settings · spectrum · harmonics · provenance"),
-    ("argument checks", "checks"),
+    ("checks, JSON", "checks · jsonvalues"),
     ("C++ core", "_core (pybind11: translation only) · _blas · version"),
 ]
 SIDE = [("side leaves", "io/  (file loaders)\nsimulate\nmonitoring/simulator"), ]
@@ -58,7 +58,7 @@ def main(path=Path(__file__).resolve().parent / "img" / "architecture.png"):
     for label, mods in SIDE:
         box(ax, 0.78, 0.50, 0.19, 0.10, mods, "#e4f1dc")
         ax.text(0.875, 0.615, f"{label}: only checks below them", ha="center", fontsize=8, color="0.3")
-    ax.text(0.875, 0.45, "used by analysis (io),\nvalidation and demo (simulate)", ha="center", va="top", fontsize=7.5,
+    ax.text(0.875, 0.45, "used by analysis (io), validation,\ndemo (simulate), monitoring (its simulator)", ha="center", va="top", fontsize=7.5,
             color="0.35")
     ax.text(0.875, 0.86, "no upward edge: a result type sits\nabove what its convenience methods reach:\n"
             "Result.plot() → Diagram.select_modes()\n→ SelectedModes.to_dict();\nfunctions take types by their fields",

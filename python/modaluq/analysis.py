@@ -96,7 +96,8 @@ def _warnings_of_selection(result: Result, selected: SelectedModes, fs: float) -
     block_s = result.slow_decay.block_seconds
     f, xi = selected.frequency_hz[slow], selected.damping_ratio[slow]
     longest = float((1.0 / (2 * np.pi * f * xi)).max())  # the decay time the blocks should cover
-    fitting = int(result.n_blocks * result.block_length / fs / (0.5 * longest))  # blocks of half that time
+    # the core's rule (identify.hpp, SlowDecay) applied to the selected modes' longest decay
+    fitting = int(result.slow_decay.record_seconds / (0.5 * longest))  # blocks of half that time
     advice = (f"use n_blocks <= {fitting}" if fitting >= 2
               else "the record is too short for their decay (a longer record is needed)")
     out[k] = (f"{int(slow.sum())} of the {selected.n_modes} selected modes ({', '.join(f'{x:.4g}' for x in f)} "

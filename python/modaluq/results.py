@@ -246,6 +246,12 @@ class Result:
     def __iter__(self):
         return iter(self.modes)
 
+    @property
+    def core_identification(self):
+        """The core's ``Identification`` these modes were read from (``None`` for a Result made
+        otherwise): what :func:`modaluq.stabilization_diagram` hands to ``_core.poles_of``."""
+        return self._identification
+
     def __getstate__(self):
         # the core's objects do not pickle; a copy falls back to its modes (same numbers)
         state = dict(self.__dict__)

@@ -252,7 +252,7 @@ def select_modes(diagram, settings: ClusteringSettings | None = None, **kwargs) 
         Sorted by frequency; empty when no pole qualifies.
     """
     # the core's diagram, kept by stabilization_diagram (stabilization.py sits above this module)
-    core_diagram = getattr(diagram, "_core_diagram", None)
+    core_diagram = getattr(diagram, "core_diagram", None)
     if not isinstance(core_diagram, _core.Diagram):
         raise TypeError(f"diagram must be a Diagram made by stabilization_diagram (a constructed, copied or "
                         f"unpickled one is not: make it again with stabilization_diagram(result)); "

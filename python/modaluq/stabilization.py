@@ -125,6 +125,13 @@ class Diagram:
     def n_poles(self) -> int:
         return int(self.order.size)
 
+    @property
+    def core_diagram(self):
+        """The core's diagram these arrays were read from, which :func:`modaluq.select_modes`
+        clusters (``None`` for a Diagram constructed, copied or unpickled). Editing the arrays
+        in place does not change it: make the diagram again with :func:`stabilization_diagram`."""
+        return self._core_diagram
+
     def __getstate__(self):
         state = dict(self.__dict__)  # the core's objects do not pickle
         state.pop("_core_diagram", None)
@@ -246,7 +253,7 @@ def stabilization_diagram(result, criteria: StabilityCriteria | None = None, *,
         if len(names) != n_out:
             raise ValueError(f"output_names must have {n_out} entries (one per output); got {len(names)}")
     has_std = all(m.has_uncertainty for m in result.modes)
-    ident = getattr(result, "_identification", None)  # the core's, kept by identify() (results.py)
+    ident = getattr(result, "core_identification", None)  # the core's, kept by identify() (results.py)
     poles = _core.poles_of(ident) if ident is not None else _poles_of_modes(result, has_std)
     if poles.frequency_hz.size == 0:  # no pole: the shapes keep one row per channel all the same
         poles.mode_shape = np.zeros((n_out, 0), complex)

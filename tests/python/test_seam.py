@@ -110,7 +110,7 @@ def test_python_words_each_dropped_cluster_as_the_core_does(name):
 
     a = _run(name)
     sel = a.selected
-    core = _core.select_modes(a.diagram._core_diagram, a.clustering.to_core())
+    core = _core.select_modes(a.diagram.core_diagram, a.clustering.to_core())
     assert list(sel.dropped_reason) == list(core.dropped_reason)
     assert [dropped_reason_text(sel, k) for k in range(len(sel.dropped_code))] == list(core.dropped_reason)
     assert all(isinstance(c, DropReason) for c in sel.dropped_code)

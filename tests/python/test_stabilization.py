@@ -113,9 +113,9 @@ def test_diagram_is_the_cores_and_a_result_without_it_gives_the_same_numbers():
     sim = modaluq.simulate(20_000, seed=1)
     for u, extra in ((None, {}), (sim.u, {}), (None, {"uncertainty": False}), (sim.u, {"frequency_range": (1, 16)})):
         result = modaluq.identify(sim.y, u, fs=sim.fs, block_rows=15, orders=range(2, 31, 2), **extra)
-        assert result._identification is not None
+        assert result.core_identification is not None
         copies = [dataclasses.replace(result), pickle.loads(pickle.dumps(result))]
-        assert all(c._identification is None for c in copies)
+        assert all(c.core_identification is None for c in copies)
         diagram = result.stabilization_diagram()
         for copy in copies:
             other = copy.stabilization_diagram()

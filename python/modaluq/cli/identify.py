@@ -19,7 +19,6 @@ from .._core import NumericalError
 from ..analysis import Analysis
 from ..checks import require
 from ..io import SUPPORTED_EXTENSIONS
-from ..plot import plot_stabilization_diagram
 from ..version import __version__
 from .common import CliError, check_image_paths, check_output_paths, integer_option, option_error, real_option
 from .options import add_analysis_options, analysis_settings, stated_options
@@ -181,6 +180,8 @@ def run(args) -> int:
 
         if args.plot:
             step("plotting the diagram")
+            from ..plot import plot_stabilization_diagram  # matplotlib only when a plot is asked for
+
             fig = plot_stabilization_diagram(analysis.diagram, y=analysis.preprocessed.y, selected=analysis.selected,
                                              nperseg=args.nperseg)
             fig.savefig(args.plot, dpi=args.dpi)
