@@ -58,8 +58,8 @@ def main(path=Path(__file__).resolve().parent / "img" / "architecture.png"):
     for label, mods in SIDE:
         box(ax, 0.78, 0.50, 0.19, 0.10, mods, "#e4f1dc")
         ax.text(0.875, 0.615, f"{label}: only checks below them", ha="center", fontsize=8, color="0.3")
-    ax.text(0.875, 0.45, "used by analysis (io), validation,\ndemo (simulate), monitoring (its simulator)", ha="center", va="top", fontsize=7.5,
-            color="0.35")
+    ax.text(0.875, 0.45, "used by analysis (io), validation,\ndemo (simulate), monitoring (its simulator)",
+            ha="center", va="top", fontsize=7.5, color="0.35")
     ax.text(0.875, 0.86, "no upward edge: a result type sits\nabove what its convenience methods reach:\n"
             "Result.plot() → Diagram.select_modes()\n→ SelectedModes.to_dict();\nfunctions take types by their fields",
             ha="center", va="center", fontsize=7.5, color="0.35", bbox=dict(fc="white", ec="0.7", lw=0.6))
