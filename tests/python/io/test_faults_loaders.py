@@ -252,7 +252,7 @@ def test_parse_timeout_scales_with_the_file_size():
 
 
 def _hanging_h5(tmp_path):
-    """libhdf5 loops forever reading the string attribute of this 2.6 kB file."""
+    """libhdf5 loops forever reading the string attribute of this 7.7 kB file."""
     p = tmp_path / "hang.h5"
     with h5py.File(p, "w") as f:
         d = f.create_dataset("acc", data=np.zeros((100, 2)))
