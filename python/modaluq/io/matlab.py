@@ -202,6 +202,15 @@ class _H5Mat:
         """``grp[name]`` without following a link out of the file (``hdf5.h5_get``)."""
         return h5_get(grp, name, self.p, self.allow_external)
 
+    def deref(self, ref):
+        """The object a cell's reference points at, which must be in this file."""
+        obj = self.f[ref]
+        if obj.file.filename != self.f.filename and not self.allow_external:
+            raise fail(self.p, f"a reference points into the file {obj.file.filename!r}; "
+                               "references leaving the file are refused (allow_external=True "
+                               "follows them)")
+        return obj
+
     def keys(self, grp=None):
         grp = self.f if grp is None else grp
         return [k for k in grp.keys() if not k.startswith("#")]
@@ -230,8 +239,7 @@ class _H5Mat:
             return rows[0] if len(rows) == 1 else rows
         if cls == "cell" or data.dtype == h5py.ref_dtype or data.dtype.kind == "O":
             refs = np.asarray(data).T.ravel()
-            items = [self.convert(self.f[r]) for r in refs]
-            return items
+            return [self.convert(self.deref(r)) for r in refs]
         if data.dtype.names is not None:
             if set(data.dtype.names) >= {"real", "imag"}:
                 return _Unsupported("complex array")
