@@ -24,8 +24,9 @@ __all__ = ["Recording", "RecordingFileError", "load", "FileFormat", "FILE_FORMAT
            "read_uff", "read_tdms", "from_sep005", "to_sep005"]
 
 #: Time limit (s) for one file parsed in an isolated child process (MATLAB, HDF5 readers with
-#: ``isolate=True``, the default), plus one second per 50 MB of file; past it the parser is
-#: killed and a RecordingFileError says so. See docs/reliability.md.
+#: ``isolate=True``, the default), plus one second per 50 MB of file; a small file gets less
+#: (5 s plus 1 s per MB, ``_common.parse_timeout``). Past it the parser is killed and a
+#: RecordingFileError says so. See docs/reliability.md.
 PARSE_TIMEOUT = 60.0
 
 

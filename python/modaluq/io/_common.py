@@ -58,15 +58,31 @@ def reading(path, what: str):
                          "format?)") from exc
 
 
+#: Time limit (s) of the isolated parse of a small file, and the seconds added per MB: a parser
+#: reads far faster than 1 MB/s, so a corrupt 1 kB file that makes it loop is stopped in about
+#: 5 s instead of the full ``PARSE_TIMEOUT``.
+SMALL_FILE_PARSE_TIMEOUT, PARSE_SECONDS_PER_MB = 5.0, 1.0
+
+
+def parse_timeout(size: int, limit: float | None = None) -> float:
+    """Time limit (s) for parsing a file of ``size`` bytes in the isolated child:
+    ``min(limit, SMALL_FILE_PARSE_TIMEOUT + PARSE_SECONDS_PER_MB * MB) + MB / 50``, where
+    ``limit`` defaults to ``modaluq.io.PARSE_TIMEOUT`` (60 s). Small files get a few seconds,
+    files from about 55 MB up the full limit, plus one second per 50 MB as before."""
+    if limit is None:
+        limit = float(getattr(sys.modules[__package__], "PARSE_TIMEOUT", 60.0))
+    mb = size / 1e6
+    return min(limit, SMALL_FILE_PARSE_TIMEOUT + PARSE_SECONDS_PER_MB * mb) + mb / 50
+
+
 def parse_isolated(isolate, func, path, what: str, *args, **kwargs):
     """``func(*args, **kwargs)``, in a child process when ``isolate`` (see ``_isolate``), with
-    the time limit ``modaluq.io.PARSE_TIMEOUT`` plus one second per 50 MB of file."""
+    the time limit :func:`parse_timeout` of the file's size."""
     if not check_boolean("isolate", isolate):
         return func(*args, **kwargs)
     from . import _isolate
 
-    base = float(getattr(sys.modules[__package__], "PARSE_TIMEOUT", 60.0))
-    timeout = base + Path(path).stat().st_size / 50e6
+    timeout = parse_timeout(Path(path).stat().st_size)
     return _isolate.run(func, path, what, *args, timeout=timeout, **kwargs)
 
 

@@ -216,5 +216,7 @@ def run(func, path, what: str, *args, timeout: float, **kwargs):
                          "corrupt or triggers a bug in the parser; nothing was loaded")
     if kind == "timeout":
         raise fail(path, f"the {what} parser did not finish within {value:.0f} s (corrupt file?); "
-                         "it was stopped. Raise modaluq.io.PARSE_TIMEOUT for very large files")
+                         "it was stopped. The limit grows with the file's size up to "
+                         "modaluq.io.PARSE_TIMEOUT (docs/reliability.md); isolate=False parses "
+                         "without a limit")
     raise fail(path, f"the {what} parser exited unexpectedly (status {value})")

@@ -10,6 +10,7 @@ import zlib
 
 import numpy as np
 
+from ..checks import check_boolean
 from ._common import (
     check_fs_arg,
     check_path,
@@ -21,6 +22,7 @@ from ._common import (
     reading,
     str_list,
 )
+from .hdf5 import check_h5_dataset, h5_get
 from .recording import Recording
 
 __all__ = ["read_matlab", "FS_VARIABLE_NAMES"]
@@ -193,8 +195,21 @@ def _get_path(tree: dict, name: str, p):
 class _H5Mat:
     """Minimal reader of MATLAB v7.3 variables as a lazy dict-like tree."""
 
-    def __init__(self, f, p):
-        self.f, self.p = f, p
+    def __init__(self, f, p, allow_external=False):
+        self.f, self.p, self.allow_external = f, p, allow_external
+
+    def get(self, grp, name):
+        """``grp[name]`` without following a link out of the file (``hdf5.h5_get``)."""
+        return h5_get(grp, name, self.p, self.allow_external)
+
+    def deref(self, ref):
+        """The object a cell's reference points at, which must be in this file."""
+        obj = self.f[ref]
+        if obj.file.filename != self.f.filename and not self.allow_external:
+            raise fail(self.p, f"a reference points into the file {obj.file.filename!r}; "
+                               "references leaving the file are refused (allow_external=True "
+                               "follows them)")
+        return obj
 
     def keys(self, grp=None):
         grp = self.f if grp is None else grp
@@ -209,11 +224,12 @@ class _H5Mat:
                 return _Unsupported("sparse matrix")
             if cls != "struct":
                 return _Unsupported(f"MATLAB {cls} object")
-            return {k: self.convert(obj[k]) for k in self.keys(obj)}
+            return {k: self.convert(self.get(obj, k)) for k in self.keys(obj)}
         cls = obj.attrs.get("MATLAB_class", b"")
         cls = cls.decode() if isinstance(cls, bytes) else str(cls)
         if np.any(np.asarray(obj.attrs.get("MATLAB_empty", 0))):
             return np.zeros((0, 0))
+        check_h5_dataset(obj, self.p, self.allow_external)
         data = obj[()]
         if cls == "char":
             a = np.asarray(data, dtype=np.uint16).T  # MATLAB (rows, chars)
@@ -223,8 +239,7 @@ class _H5Mat:
             return rows[0] if len(rows) == 1 else rows
         if cls == "cell" or data.dtype == h5py.ref_dtype or data.dtype.kind == "O":
             refs = np.asarray(data).T.ravel()
-            items = [self.convert(self.f[r]) for r in refs]
-            return items
+            return [self.convert(self.deref(r)) for r in refs]
         if data.dtype.names is not None:
             if set(data.dtype.names) >= {"real", "imag"}:
                 return _Unsupported("complex array")
@@ -243,12 +258,12 @@ class _Unsupported:
         return f"<{self.what}>"
 
 
-def _load_v73(p) -> dict:
+def _load_v73(p, allow_external=False) -> dict:
     h5py = optional_import("h5py", "h5py", "MATLAB v7.3 .mat")
     with reading(p, "MATLAB v7.3 (HDF5) .mat file"):
         with h5py.File(str(p), "r") as f:
-            m = _H5Mat(f, p)
-            return {k: m.convert(f[k]) for k in m.keys()}
+            m = _H5Mat(f, p, allow_external)
+            return {k: m.convert(m.get(f, k)) for k in m.keys()}
 
 
 # ---------------------------------------------------------------------------- common
@@ -291,7 +306,8 @@ def _describe(v) -> str:
 
 
 def read_matlab(path, *, fs=None, inputs=None, variable=None, names=None, units=None,
-                transpose=None, time_tolerance=0.01, isolate=True) -> Recording:
+                transpose=None, time_tolerance=0.01, isolate=True,
+                allow_external=False) -> Recording:
     """Read channels from a MATLAB ``.mat`` file (v4/v5/v7 or v7.3).
 
     Parameters
@@ -312,8 +328,13 @@ def read_matlab(path, *, fs=None, inputs=None, variable=None, names=None, units=
         (cell array of strings or char matrix) when their length matches, else ``ch0, ch1, ...``.
     isolate : bool
         Parse in a child process (default), so that a crash or a hang of SciPy or HDF5 on a
-        corrupt file becomes a ValueError naming the file (time limit
+        corrupt file becomes a ValueError naming the file (time limit: see
         ``modaluq.io.PARSE_TIMEOUT``); False parses in this process (saves a few ms per file).
+    allow_external : bool
+        v7.3 (HDF5) files: False (default) refuses external links, external raw storage and
+        virtual datasets, which make HDF5 read other files, naming the variable and the target;
+        True follows them. Partly written or impossibly large datasets are refused either way,
+        as by :func:`modaluq.io.read_hdf5`.
     """
     p = check_path(path)
     check_fs_arg(fs)
@@ -329,9 +350,10 @@ def read_matlab(path, *, fs=None, inputs=None, variable=None, names=None, units=
         variables = None
     if transpose is not None and not isinstance(transpose, bool):
         raise TypeError(f"transpose must be True, False or None, got {transpose!r}")
+    allow_external = check_boolean("allow_external", allow_external)
 
     if _is_hdf5(p):
-        tree = parse_isolated(isolate, _load_v73, p, "MATLAB v7.3 (HDF5)", p)
+        tree = parse_isolated(isolate, _load_v73, p, "MATLAB v7.3 (HDF5)", p, allow_external)
     else:
         _validate_v5(p)
         tree = parse_isolated(isolate, _load_v5, p, "MATLAB", p)
