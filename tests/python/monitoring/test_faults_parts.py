@@ -141,6 +141,7 @@ def test_a_second_run_on_a_store_is_refused_naming_the_holder(site, tmp_path, ca
     finally:
         holder.kill()
         holder.wait(30)
+        holder.stdout.close()
     assert (tmp_path / "t.lock").exists()
     assert monitor(site, out=out, **RUN).n_run == 6
 
