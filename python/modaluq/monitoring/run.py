@@ -166,7 +166,9 @@ def monitor(records, *, out=None, settings: Settings | None = None, criteria: St
         ``.nc`` (NetCDF) or ``.zarr`` store of the tracks; beside it ``<stem>.failures.csv``, the
         pole table ``<stem>.poles.csv`` (or ``poles=``, ``.csv`` or ``.parquet``) and the part
         files ``<stem>.parts/`` that make a run restartable (a ``.nc`` and a ``.zarr`` store of
-        one stem share them). Without ``out`` nothing is written and nothing is resumed.
+        one stem share them). Without ``out`` nothing is written and nothing is resumed. One run
+        at a time: the run holds ``<stem>.lock``; another run on the store is refused
+        (:class:`~modaluq.monitoring.parts.StoreInUseError`, naming it).
     settings, criteria, clustering :
         As for :class:`~modaluq.Analysis` / ``modaluq identify``: the same for every record.
     tracking : TrackingSettings, optional
@@ -186,8 +188,11 @@ def monitor(records, *, out=None, settings: Settings | None = None, criteria: St
         processes; ``scheduler="tcp://host:port"``. None of them: an active Dask client if
         there is one, else a thread pool of one thread per core.
     resume : bool, default True
-        Skip the records whose part file says they are done (failed ones are run again). False:
+        Skip the records whose part file says they are done with these settings about the
+        file's bytes as they are now (failed ones, files changed since, are run again). False:
         start again, the part files of earlier runs (whatever their settings) are removed first.
+        A file modified less than :data:`~modaluq.monitoring.worker.SETTLE_SECONDS` ago, or
+        while it was read, is still being written: left out (a note says so) for the next run.
     progress : bool, optional
         A progress bar on stderr (default: when stderr is a terminal).
 
