@@ -43,6 +43,7 @@ class _TrackingDefaults(argparse.HelpFormatter):
 def run(args) -> int:
     """Execute ``modaluq monitor`` for parsed ``args``; return the exit status."""
     from ..monitoring import TrackingSettings, monitor  # the wing: only for this command
+    from ..monitoring.parts import StoreInUseError
 
     options = set(vars(args))
     settings, criteria, clustering = analysis_settings(args)
@@ -69,6 +70,8 @@ def run(args) -> int:
                              check_harmonics=args.check_harmonics, threads=args.threads,
                              workers=args.workers, scheduler=args.scheduler, resume=not args.no_resume,
                              poles=args.poles, progress=False if args.no_progress else None)
+    except StoreInUseError as exc:  # another run on --out: it is named, nothing was touched
+        raise CliError(f"{exc} (--out)") from None
     except ValueError as exc:
         raise option_error(exc, options) from None
 

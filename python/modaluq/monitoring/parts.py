@@ -6,22 +6,78 @@ atomically by the driver process (a killed run leaves whole parts only); ``setti
 holds the fingerprint of the settings the parts were made with, and a run with other settings
 refuses to mix them. A part holds plain values (:func:`jsonable`): the status, the failed stage
 and its error, or the selected modes and their poles (:func:`record_modes` reads them back).
+
+A part says "done" about bytes, not a path: it keeps the settings' hash it was made with and the
+file's size, mtime and SHA-256 (:mod:`~modaluq.monitoring.worker`); :meth:`Parts.done` uses it
+only while both still hold. One run at a time on a store: :func:`store_lock`.
 """
 
 from __future__ import annotations
 
 import contextlib
+import datetime
 import hashlib
 import json
 import os
+import shlex
+import socket
+import sys
 from pathlib import Path
 
 import numpy as np
 
 from ..jsonvalues import dumps
+from .records import file_sha256, file_state
 from .tracking import RecordModes
 
-__all__ = ["Parts", "array_of", "record_modes"]
+__all__ = ["Parts", "StoreInUseError", "array_of", "record_modes", "store_lock"]
+
+
+class StoreInUseError(RuntimeError):
+    """Another run holds the store's lock (:func:`store_lock`); the message names it."""
+
+
+@contextlib.contextmanager
+def store_lock(store, command: str | None = None):
+    """Hold the lock of the store ``store`` (the file ``<stem>.lock`` beside it, shared by the
+    ``.nc`` and ``.zarr`` stores of one stem, like their parts) for the ``with`` block: an
+    exclusive ``flock``, so a second run on the store is refused (:class:`StoreInUseError` naming
+    the holder: pid, host, start, command) and the lock of a killed run is released with its
+    process (the file left behind does not block). Where ``flock`` is missing (Windows) or the
+    file system refuses it, the run goes on unlocked. The file is kept: deleting a lock file lets
+    two runs hold two files of one name."""
+    store = Path(store)
+    path = store.with_name(store.stem + ".lock")
+    try:
+        import fcntl
+    except ImportError:  # no flock here: concurrent runs are not detected
+        yield
+        return
+    fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            locked = True
+        except BlockingIOError:
+            holder = " ".join(os.pread(fd, 4096, 0).decode(errors="replace").split()) or "holder not yet written"
+            raise StoreInUseError(f"the store {store} is in use by another run: {holder} (lock file "
+                                  f"{path}); wait for it to finish, or write to another store") from None
+        except OSError:  # a file system without locks (some network mounts): go on unlocked
+            locked = False
+        if not locked:
+            yield
+            return
+        started = datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")
+        command = command if command is not None else shlex.join([os.path.basename(sys.argv[0] or "python")]
+                                                                 + sys.argv[1:])
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, f"pid {os.getpid()} on {socket.gethostname()} since {started}: {command}\n".encode(), 0)
+        try:
+            yield
+        finally:
+            os.ftruncate(fd, 0)  # released: the file names no holder
+    finally:
+        os.close(fd)  # releases the flock
 
 
 class Parts:
@@ -60,6 +116,32 @@ class Parts:
         except (OSError, ValueError):
             return None  # absent (or, impossibly with atomic writes, torn): run it again
         return part if part.get("key") == key else None
+
+    def done(self, task, settings_id: str):
+        """The part of ``task`` (a :class:`~modaluq.monitoring.records.RecordTask`) when it says
+        *done* about what the record is now, else None (run it): made with the settings of
+        ``settings_id`` (:meth:`~modaluq.monitoring.worker.TaskConfig.fingerprint_id`) and, for a
+        file, from its bytes: the same size and mtime, or else the same SHA-256 (a file touched or
+        copied again; its part is brought up to date, so the file is hashed once)."""
+        part = self.read(task.key)
+        if part is None or part.get("status") != "done" or part.get("settings") != settings_id:
+            return None
+        if not isinstance(task.source, str):
+            return part
+        read, now = part.get("file"), file_state(task.source)
+        if not isinstance(read, dict) or now is None:
+            return None  # a part of an older modaluq (bytes unknown), or a file gone: run it again
+        if (read.get("size"), read.get("mtime_ns")) == now:
+            return part
+        try:
+            same = now[0] == read.get("size") and file_sha256(task.source) == read.get("sha256")
+        except OSError:
+            return None
+        if not same:
+            return None
+        part["file"] = dict(read, mtime_ns=now[1])
+        self.write(task.key, dumps(part))
+        return part
 
     def write(self, key: str, text: str) -> None:
         """Write the part of ``key`` (``text``: its JSON)."""

@@ -4,12 +4,15 @@ and covariates, in the order they are tracked (docs/monitoring.md §1).
 A record is a file (a path; a folder's recording files, sorted; a glob pattern) or an object
 with ``load()`` or with ``y`` and ``fs``; each becomes a :class:`RecordTask` (small, picklable:
 what a worker needs) with its name, time (from the object, the covariate table or the file name)
-and covariates. Records are ordered by time where it is known.
+and covariates. Records are ordered by time where it is known. A file reached through several
+symbolic links (or a link and its target) is one record; a dangling link is a record, which fails
+at ``load``. :func:`file_state` and :func:`file_sha256` say which bytes a part was made from.
 """
 
 from __future__ import annotations
 
 import glob
+import hashlib
 import os
 import re
 from dataclasses import dataclass, field
@@ -20,8 +23,8 @@ import numpy as np
 
 from ..io import SUPPORTED_EXTENSIONS
 
-__all__ = ["RECORD_EXTENSIONS", "RecordTask", "covariate_matrix", "record_files", "record_tasks", "record_times",
-           "time_from_name"]
+__all__ = ["RECORD_EXTENSIONS", "RecordTask", "covariate_matrix", "file_sha256", "file_state", "record_files",
+           "record_tasks", "record_times", "time_from_name"]
 
 #: Extensions a folder given to :func:`monitor` is searched for.
 RECORD_EXTENSIONS = tuple(sorted(SUPPORTED_EXTENSIONS))
@@ -43,9 +46,10 @@ def record_files(paths) -> list:
             hits = sorted(glob.glob(text, recursive=True))
             if not hits:
                 raise ValueError(f"records: the pattern {text!r} matches no file")
-            out += [Path(h) for h in hits if Path(h).is_file()]
+            out += [Path(h) for h in hits if Path(h).is_file() or _dangling(Path(h))]
         elif Path(text).is_dir():
-            hits = sorted(f for f in Path(text).iterdir() if f.is_file() and f.suffix.lower() in RECORD_EXTENSIONS)
+            hits = sorted(f for f in Path(text).iterdir()
+                          if (f.is_file() or _dangling(f)) and f.suffix.lower() in RECORD_EXTENSIONS)
             if not hits:
                 raise ValueError(f"records: the folder {text!r} holds no recording file "
                                  f"({' '.join(RECORD_EXTENSIONS)})")
@@ -55,6 +59,30 @@ def record_files(paths) -> list:
         else:
             out.append(Path(text))  # a missing file is the record's failure, not the batch's (copied late)
     return out
+
+
+def _dangling(path: Path) -> bool:
+    """A symbolic link whose target does not exist: listed, so that its record fails at ``load``
+    (a recording moved away is said, not skipped)."""
+    return path.is_symlink() and not path.exists()
+
+
+def file_state(path) -> Optional[tuple]:
+    """``(size, mtime_ns)`` of a file (through links), or None when it cannot be read."""
+    try:
+        st = os.stat(path)
+    except OSError:
+        return None
+    return st.st_size, st.st_mtime_ns
+
+
+def file_sha256(path, chunk: int = 1 << 20) -> str:
+    """The SHA-256 of a file's bytes (hex), read in chunks of ``chunk`` bytes."""
+    digest = hashlib.sha256()
+    with open(path, "rb") as fh:
+        while block := fh.read(chunk):
+            digest.update(block)
+    return digest.hexdigest()
 
 
 def time_from_name(name: str):
@@ -73,11 +101,12 @@ def time_from_name(name: str):
 class RecordTask:
     """What a worker needs for one record (small, picklable)."""
 
-    key: str                  #: unique: the absolute path, or the record object's name
+    key: str                  #: unique: the absolute path (links resolved), or the record object's name
     name: str                 #: shown in tables and plots
     source: object            #: a path (str), or an object with ``load()`` or with ``y`` and ``fs``
     time: Optional[np.datetime64] = None
     covariates: dict = field(default_factory=dict)
+    aliases: tuple = ()       #: other paths given that are this file (symbolic links), taken once
 
 
 def record_tasks(records, covariates=None) -> list:
@@ -99,6 +128,7 @@ def record_tasks(records, covariates=None) -> list:
                             f"or with y and fs; got {type(r).__name__}")
     if not items:
         raise ValueError("records: no record given")
+    items, aliases = _one_per_file(items)
     table = _covariate_table(covariates)
     tasks, matched = [], 0
     for k, (path, obj) in enumerate(items):
@@ -120,7 +150,8 @@ def record_tasks(records, covariates=None) -> list:
                 row.pop("time", None)
             cov.update(row)
         tasks.append(RecordTask(key=key, name=name, source=source,
-                                time=None if t is None else np.datetime64(t, "s"), covariates=cov))
+                                time=None if t is None else np.datetime64(t, "s"), covariates=cov,
+                                aliases=aliases.get(k, ())))
     if table and not matched:
         raise ValueError(f"covariates: no row of the table is a record (its 'record' column holds e.g. "
                          f"{next(iter(table))!r}; the records are named e.g. {tasks[0].name!r})")
@@ -133,6 +164,27 @@ def record_tasks(records, covariates=None) -> list:
         # time after them, in the order given (a note says so: run.py)
         tasks.sort(key=lambda t: (t.time is None, t.time if t.time is not None else np.datetime64(0, "s")))
     return tasks
+
+
+def _one_per_file(items: list) -> tuple:
+    """The items (``(path, None)`` or ``(None, object)``) with one path per file: of the paths that
+    resolve to one file through symbolic links, the file itself (else the first given) is kept, and
+    the others are its aliases (``{index in the returned items: (alias paths, ...)}``). A path given
+    twice as such is left to be refused by :func:`record_tasks`."""
+    groups = {}
+    for k, (path, _) in enumerate(items):
+        if path is not None:
+            groups.setdefault(str(path.resolve()), []).append(k)
+    dropped, alias_of = set(), {}
+    for target, ks in groups.items():
+        if len({os.path.abspath(items[k][0]) for k in ks}) < len(ks):
+            continue  # the same path more than once: a mistake in the list, refused
+        if len(ks) > 1:
+            keep = next((k for k in ks if os.path.abspath(items[k][0]) == target), ks[0])
+            alias_of[keep] = tuple(str(items[k][0]) for k in ks if k != keep)
+            dropped.update(k for k in ks if k != keep)
+    kept = [k for k in range(len(items)) if k not in dropped]
+    return [items[k] for k in kept], {i: alias_of[k] for i, k in enumerate(kept) if k in alias_of}
 
 
 def _is_record_object(r) -> bool:

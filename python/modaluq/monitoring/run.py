@@ -19,6 +19,7 @@ import sys
 import time
 import warnings
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Optional
 
 import numpy as np
@@ -31,10 +32,10 @@ from ..settings import ClusteringSettings, Settings, StabilityCriteria
 from . import store
 from .change import change_test, miscalibrated
 from .executors import cancel_queued, executor_for
-from .parts import Parts, record_modes
+from .parts import Parts, record_modes, store_lock
 from .records import covariate_matrix, record_tasks, record_times
 from .tracking import ReferenceModes, TrackingSettings, reference_period, track
-from .worker import TaskConfig, process_record
+from .worker import TaskConfig, process_record, settle_seconds
 
 __all__ = ["Monitoring", "monitor"]
 
@@ -165,7 +166,9 @@ def monitor(records, *, out=None, settings: Settings | None = None, criteria: St
         ``.nc`` (NetCDF) or ``.zarr`` store of the tracks; beside it ``<stem>.failures.csv``, the
         pole table ``<stem>.poles.csv`` (or ``poles=``, ``.csv`` or ``.parquet``) and the part
         files ``<stem>.parts/`` that make a run restartable (a ``.nc`` and a ``.zarr`` store of
-        one stem share them). Without ``out`` nothing is written and nothing is resumed.
+        one stem share them). Without ``out`` nothing is written and nothing is resumed. One run
+        at a time: the run holds ``<stem>.lock``; another run on the store is refused
+        (:class:`~modaluq.monitoring.parts.StoreInUseError`, naming it).
     settings, criteria, clustering :
         As for :class:`~modaluq.Analysis` / ``modaluq identify``: the same for every record.
     tracking : TrackingSettings, optional
@@ -185,8 +188,11 @@ def monitor(records, *, out=None, settings: Settings | None = None, criteria: St
         processes; ``scheduler="tcp://host:port"``. None of them: an active Dask client if
         there is one, else a thread pool of one thread per core.
     resume : bool, default True
-        Skip the records whose part file says they are done (failed ones are run again). False:
+        Skip the records whose part file says they are done with these settings about the
+        file's bytes as they are now (failed ones, files changed since, are run again). False:
         start again, the part files of earlier runs (whatever their settings) are removed first.
+        A file modified less than :data:`~modaluq.monitoring.worker.SETTLE_SECONDS` ago, or
+        while it was read, is still being written: left out (a note says so) for the next run.
     progress : bool, optional
         A progress bar on stderr (default: when stderr is a terminal).
 
@@ -206,15 +212,23 @@ def monitor(records, *, out=None, settings: Settings | None = None, criteria: St
                         check_harmonics=check_boolean("check_harmonics", check_harmonics),
                         read={k: v for k, v in dict(fs=fs, format=format, read_options=read_options, outputs=outputs,
                                                     inputs=inputs, references=references).items() if v is not None})
+    config = dataclasses.replace(config, settle_seconds=settle_seconds())
     out_paths = store.output_paths(out, poles)
     tasks = record_tasks(records, covariates)
+    with store_lock(out_paths["store"]) if out_paths else contextlib.nullcontext():  # one run at a time
+        return _run(tasks, config, out_paths, tracking, executor, threads, workers, scheduler, resume, progress, t0)
+
+
+def _run(tasks, config, out_paths, tracking, executor, threads, workers, scheduler, resume, progress, t0):
+    """:func:`monitor` once its arguments are checked (and its store locked)."""
     parts = Parts(out_paths["parts"], config, start_again=not resume) if out_paths else None
 
     results = {}
     if parts is not None and resume:
+        settings_id = config.fingerprint_id()
         for task in tasks:
-            part = parts.read(task.key)
-            if part is not None and part["status"] == "done":
+            part = parts.done(task, settings_id)  # None: not done, other settings, or its file changed
+            if part is not None:
                 results[task.key] = part
     todo = [t for t in tasks if t.key not in results]
     n_run = len(todo)
@@ -250,19 +264,40 @@ def monitor(records, *, out=None, settings: Settings | None = None, criteria: St
                 n_failed += part["status"] != "done"
                 bar.set_postfix_str(f"{n_failed} failed", refresh=False)
                 bar.update()
+    # a file still being written is not a record yet: left out of the store, read by the next run
+    writing = [t for t in tasks if results[t.key]["status"] == "writing"]
+    tasks = [t for t in tasks if results[t.key]["status"] != "writing"]
+    if not tasks:  # nothing to track: the store is not written
+        raise ValueError(f"records: every record file is still being written ({_names(writing, [True] * len(writing))}"
+                         f": modified less than {config.settle_seconds:g} s ago or while being read); run again later")
     ordered = [results[t.key] for t in tasks]
-    result = _consolidate(tasks, ordered, tracking)
-    result.n_run = n_run
+    result = _consolidate(tasks, ordered, tracking, first_notes=_file_notes(tasks, writing, config.settle_seconds))
+    result.n_run = n_run - len(writing)
     if out_paths:
         result.written = store.write(result, out_paths)
     result.seconds = time.perf_counter() - t0
     for note in result.notes:
-        warnings.warn(note, ModalUQWarning, stacklevel=2)
+        warnings.warn(note, ModalUQWarning, stacklevel=3)  # the caller of monitor
     return result
 
 
-def _consolidate(tasks: list, parts: list, tracking: TrackingSettings) -> Monitoring:
-    """The records' parts (in the tasks' order) → tracks, change test, store tables and notes."""
+def _file_notes(tasks: list, writing: list, settle: float) -> list:
+    """Notes on the files: records reached through several links (taken once), files still being
+    written (``writing``: their tasks, modified less than ``settle`` seconds ago or while read; left
+    for the next run)."""
+    notes = [f"records: {', '.join(Path(a).name for a in t.aliases)} "
+             f"{'is' if len(t.aliases) == 1 else 'are'} the same file as {t.name} (symbolic links): taken once, "
+             f"as {t.name}" for t in tasks if t.aliases]
+    if writing:
+        notes.append(f"{len(writing)} record file(s) still being written, left for the next run "
+                     f"({_names(writing, np.ones(len(writing), bool))}): modified less than {settle:g} s "
+                     "ago or while being read")
+    return notes
+
+
+def _consolidate(tasks: list, parts: list, tracking: TrackingSettings, first_notes=()) -> Monitoring:
+    """The records' parts (in the tasks' order) → tracks, change test, store tables and notes
+    (``first_notes``: the files' notes, before the tests')."""
     done = np.array([p["status"] == "done" for p in parts])
     channels = next((tuple(p["output_names"]) for p in parts if p["status"] == "done"), ())
     for k, p in enumerate(parts):  # a record with other channels cannot be tracked with the rest
@@ -289,7 +324,7 @@ def _consolidate(tasks: list, parts: list, tracking: TrackingSettings) -> Monito
     if test is not None:
         flagged = miscalibrated(test.reference_reduced_chi2_frequency, test.reference_reduced_chi2_damping,
                                 int(in_ref.sum()), 1 + len(cov_names))
-    notes = _notes(tasks, done, in_ref, X, cov_names, tracking, flagged)
+    notes = list(first_notes) + _notes(tasks, done, in_ref, X, cov_names, tracking, flagged)
     ds = store.dataset(tasks, parts, done, tracks, test, channels=channels, times=times, covariate_names=cov_names,
                        covariates=X, miscalibrated=flagged, tracking=tracking, error=error, notes=notes)
     return Monitoring(dataset=ds, poles=store.pole_table(tasks, parts, done, times, tracks),

@@ -5,10 +5,17 @@
 (``load``, ``preprocess``, ``identify``, ``select``) and its error, and the batch goes on. What it
 returns is plain values (docs/monitoring.md §1), sent back to the driver, which keeps it as the
 record's part (:mod:`modaluq.monitoring.parts`).
+
+A file's part says which bytes it was made from (``file``: size, mtime in ns, SHA-256) and with
+which settings (``settings``: :meth:`TaskConfig.fingerprint_id`). A file modified less than
+:data:`SETTLE_SECONDS` ago, or whose size or mtime changed while it was read, is "still being
+written": its status is ``writing``, nothing is identified from it, and the next run reads it again.
 """
 
 from __future__ import annotations
 
+import hashlib
+import os
 import time
 import traceback
 import warnings
@@ -17,13 +24,32 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..analysis import Analysis
-from ..jsonvalues import jsonable
+from ..jsonvalues import dumps, jsonable
 from ..settings import ClusteringSettings, Settings, StabilityCriteria
 from ..version import __version__
 from .executors import configure_worker_process
-from .records import RecordTask
+from .records import RecordTask, file_sha256, file_state
 
-__all__ = ["TaskConfig", "process_record"]
+__all__ = ["SETTLE_SECONDS", "TaskConfig", "process_record", "settle_seconds"]
+
+#: A file modified less than this many seconds ago is taken to be still being written (an
+#: acquisition appending to it, a copy under way) and left for the next run. The environment
+#: variable ``MODALUQ_SETTLE_SECONDS`` overrides it (the tests set 0 for files they just wrote).
+SETTLE_SECONDS = 5.0
+
+
+def settle_seconds() -> float:
+    """:data:`SETTLE_SECONDS`, or ``MODALUQ_SETTLE_SECONDS`` when set (a number >= 0)."""
+    text = os.environ.get("MODALUQ_SETTLE_SECONDS")
+    if text is None:
+        return SETTLE_SECONDS
+    try:
+        value = float(text)
+    except ValueError:
+        value = -1.0
+    if not value >= 0:
+        raise ValueError(f"MODALUQ_SETTLE_SECONDS must be a number of seconds >= 0; got {text!r}")
+    return value
 
 
 @dataclass(frozen=True)
@@ -36,11 +62,17 @@ class TaskConfig:
     read: dict = field(default_factory=dict)  #: fs, format, read_options, outputs, inputs, references
     check_harmonics: bool = False             #: flag modes that may be harmonics (costs about an identification)
     worker_process: bool = False              #: the task runs in a worker process (Dask, process pools)
+    settle_seconds: float = SETTLE_SECONDS    #: a file modified more recently is still being written
 
     def fingerprint(self) -> dict:
+        """The settings that make a part (not where or how fast it runs)."""
         return {"modaluq": __version__, "settings": self.settings.to_dict(), "criteria": self.criteria.to_dict(),
                 "clustering": self.clustering.to_dict(), "read": jsonable(self.read),
                 "check_harmonics": self.check_harmonics}
+
+    def fingerprint_id(self) -> str:
+        """A short hash of :meth:`fingerprint`, kept in every part: a part made with other settings is not used."""
+        return hashlib.sha256(dumps(self.fingerprint()).encode()).hexdigest()[:20]
 
 
 def process_record(task: RecordTask, config: TaskConfig) -> dict:
@@ -48,11 +80,26 @@ def process_record(task: RecordTask, config: TaskConfig) -> dict:
     its error, or the selected modes and their poles."""
     t0 = time.perf_counter()
     stage = "load"
-    out = {"key": task.key, "name": task.name, "status": "failed", "stage": "", "error": "", "warnings": []}
+    out = {"key": task.key, "name": task.name, "status": "failed", "stage": "", "error": "", "warnings": [],
+           "settings": config.fingerprint_id()}
     try:
         if config.worker_process:
             configure_worker_process()
+        if isinstance(task.source, str):
+            before = _settled_state(task.source, config.settle_seconds)
+            if isinstance(before, str):
+                out.update(status="writing", error=before, seconds=time.perf_counter() - t0)
+                return out
+            digest = file_sha256(task.source) if before is not None else None
         analysis = _analysis(task, config)
+        if isinstance(task.source, str) and before is not None:
+            after = file_state(task.source)
+            if after != before:  # appended to, or replaced, while it was read: not these bytes
+                out.update(status="writing", error=f"{task.source} changed while it was read (size, mtime "
+                                                   f"{before[0]}, {before[1]} ns -> {_shown(after)})",
+                           seconds=time.perf_counter() - t0)
+                return out
+            out["file"] = {"size": before[0], "mtime_ns": before[1], "sha256": digest}
         stage = "preprocess"
         analysis.preprocess()
 
@@ -76,6 +123,25 @@ def process_record(task: RecordTask, config: TaskConfig) -> dict:
             out["traceback"] = traceback.format_exc(limit=6)
     out["seconds"] = time.perf_counter() - t0
     return out
+
+
+def _settled_state(path: str, settle: float):
+    """``(size, mtime_ns)`` of a file that can be read as it is; why not (text) when it was modified
+    less than ``settle`` seconds ago (or has a time in the future, beyond that); None when it
+    cannot be read (the loader says why). A dangling symbolic link is an ``OSError`` naming it."""
+    if os.path.islink(path) and not os.path.exists(path):
+        raise FileNotFoundError(f"{path} is a dangling symbolic link (to {os.readlink(path)}, which does not exist)")
+    state = file_state(path)
+    if state is None:
+        return None
+    age = time.time() - state[1] / 1e9
+    if abs(age) < settle:
+        return f"{path} was modified {age:.1f} s ago (less than {settle:g} s)"
+    return state
+
+
+def _shown(state) -> str:
+    return "gone" if state is None else f"{state[0]}, {state[1]} ns"
 
 
 def _analysis(task: RecordTask, config: TaskConfig) -> Analysis:

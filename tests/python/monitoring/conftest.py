@@ -22,3 +22,10 @@ def csv_folder(tmp_path_factory):
     camp = simulate_monitoring(20, n_samples=4000, seed=5)
     camp.write(folder)
     return folder, camp
+
+
+@pytest.fixture(autouse=True)
+def records_written_long_ago(monkeypatch):
+    """The tests write their record files just before they run them: no wait for them to settle
+    (worker.SETTLE_SECONDS; test_faults_parts.py tests the wait)."""
+    monkeypatch.setenv("MODALUQ_SETTLE_SECONDS", "0")
