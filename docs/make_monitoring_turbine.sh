@@ -32,5 +32,5 @@ for k in range(len(channels[0]) // n):
                                        properties={"wf_increment": dt, "unit_string": "g"}) for c in channels])
     print("wrote", name)
 EOF
-"$PY" -m modaluq.cli monitor "$work/records" --out "$work/turbine_tracks.nc" --frequency-range 0.2 5 \
+"$PY" -m modaluq.cli monitor "$work/records" --out "$work/turbine_tracks.nc" --frequency-range 0.2 5 --settle-seconds 0 \
     --reference-records 3 --no-progress --plot docs/img/monitoring_turbine.png --dpi 90

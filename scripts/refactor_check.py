@@ -14,6 +14,7 @@ Takes about two minutes a run (the wind-turbine record and two monitoring folder
 from __future__ import annotations
 
 import json
+import os
 import pathlib
 import re
 import subprocess
@@ -25,7 +26,11 @@ TURBINE = DATA / "owi_offshore_wind_turbine_tower_2020.tdms"
 
 def _cli(out: pathlib.Path, name: str, *args: str) -> None:
     """Run ``modaluq ARGS`` in ``out`` and keep its stdout and stderr (the report a user reads)."""
-    proc = subprocess.run([sys.executable, "-m", "modaluq.cli", *args], cwd=out, capture_output=True, text=True)
+    # the records were just written: complete (a monitoring run leaves files modified in the last
+    # seconds for later; older versions ignore the variable)
+    env = {**os.environ, "MODALUQ_SETTLE_SECONDS": "0"}
+    proc = subprocess.run([sys.executable, "-m", "modaluq.cli", *args], cwd=out, capture_output=True, text=True,
+                          env=env)
     (out / f"{name}.stdout").write_text(proc.stdout)
     (out / f"{name}.stderr").write_text(proc.stderr)
     (out / f"{name}.status").write_text(str(proc.returncode))

@@ -69,6 +69,7 @@ def run(args) -> int:
                              inputs=args.inputs, references=args.references,
                              check_harmonics=args.check_harmonics, threads=args.threads,
                              workers=args.workers, scheduler=args.scheduler, resume=not args.no_resume,
+                             settle_seconds=args.settle_seconds,
                              poles=args.poles, progress=False if args.no_progress else None)
     except StoreInUseError as exc:  # another run on --out: it is named, nothing was touched
         raise CliError(f"{exc} (--out)") from None
@@ -168,6 +169,9 @@ def register(subparsers) -> argparse.ArgumentParser:
     x.add_argument("--workers", type=integer_option(1), default=None, metavar="N",
                    help="start a Dask LocalCluster of N one-thread worker processes")
     x.add_argument("--scheduler", default=None, metavar="ADDR", help="a running Dask scheduler, e.g. tcp://host:8786")
+    g.add_argument("--settle-seconds", type=real_option(0, low_open=False), default=None, metavar="S",
+                   help="a file modified less than S seconds before it is read is still being written: left "
+                        "for the next run (default 5, or MODALUQ_SETTLE_SECONDS; 0 for files known complete)")
     g.add_argument("--no-resume", action="store_true",
                    help="start again: remove the part files of earlier runs (any settings) and run every record")
     g = p.add_argument_group("output")

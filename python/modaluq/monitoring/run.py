@@ -25,7 +25,7 @@ from typing import Optional
 import numpy as np
 
 from .._blas import single_threaded
-from ..checks import check_boolean, check_instance
+from ..checks import check_boolean, check_instance, check_real
 from ..jsonvalues import dumps
 from ..results import ModalUQWarning
 from ..settings import ClusteringSettings, Settings, StabilityCriteria
@@ -35,7 +35,8 @@ from .executors import cancel_queued, executor_for
 from .parts import Parts, record_modes, store_lock
 from .records import covariate_matrix, record_tasks, record_times
 from .tracking import ReferenceModes, TrackingSettings, reference_period, track
-from .worker import TaskConfig, process_record, settle_seconds
+from .worker import TaskConfig, process_record
+from .worker import settle_seconds as _settle_seconds
 
 __all__ = ["Monitoring", "monitor"]
 
@@ -149,7 +150,7 @@ def monitor(records, *, out=None, settings: Settings | None = None, criteria: St
             covariates=None, fs: float | None = None, format: str | None = None, read_options: dict | None = None,
             outputs=None, inputs=None, references=None, check_harmonics: bool = False, executor=None,
             threads: int | None = None, workers: int | None = None, scheduler: str | None = None, resume: bool = True,
-            poles=None, progress: bool | None = None) -> Monitoring:
+            poles=None, progress: bool | None = None, settle_seconds: float | None = None) -> Monitoring:
     """Identify every record, track the modes, test their changes (docs/monitoring.md).
 
     Parameters
@@ -195,6 +196,10 @@ def monitor(records, *, out=None, settings: Settings | None = None, criteria: St
         while it was read, is still being written: left out (a note says so) for the next run.
     progress : bool, optional
         A progress bar on stderr (default: when stderr is a terminal).
+    settle_seconds : float, optional
+        A file modified less than this many seconds before it is read is still being written
+        (default :data:`~modaluq.monitoring.worker.SETTLE_SECONDS`, 5 s, or the environment variable
+        ``MODALUQ_SETTLE_SECONDS``). 0 for files known to be complete (e.g. just written by a script).
 
     Returns
     -------
@@ -212,7 +217,8 @@ def monitor(records, *, out=None, settings: Settings | None = None, criteria: St
                         check_harmonics=check_boolean("check_harmonics", check_harmonics),
                         read={k: v for k, v in dict(fs=fs, format=format, read_options=read_options, outputs=outputs,
                                                     inputs=inputs, references=references).items() if v is not None})
-    config = dataclasses.replace(config, settle_seconds=settle_seconds())
+    settle = _settle_seconds() if settle_seconds is None else check_real("settle_seconds", settle_seconds, low=0)
+    config = dataclasses.replace(config, settle_seconds=settle)
     out_paths = store.output_paths(out, poles)
     tasks = record_tasks(records, covariates)
     with store_lock(out_paths["store"]) if out_paths else contextlib.nullcontext():  # one run at a time
