@@ -2,7 +2,8 @@
 
 - default: a thread pool in this process (the core releases the GIL; the BLAS runs on one thread);
 - a ``dask.distributed.Client`` (given, or active), a scheduler address, or a ``LocalCluster`` of
-  ``workers`` processes, through the client's ``concurrent.futures`` executor;
+  ``workers`` processes, through the client's ``concurrent.futures`` executor. A cluster started
+  here speaks mutual TLS only and serves no HTTP; one given keeps its own security (§2, security);
 - any other :class:`concurrent.futures.Executor` (e.g. a ``ProcessPoolExecutor``).
 
 A task that runs in another process sets that process up first (:func:`configure_worker_process`).
@@ -44,14 +45,14 @@ def executor_for(executor, threads, workers, scheduler):
         return
     if workers is not None or scheduler is not None:
         require("distributed", "workers= or scheduler=")
-        from distributed import Client, LocalCluster
+        from distributed import Client
 
         if scheduler is not None:
             with Client(scheduler) as client:
                 yield client.get_executor(pure=False), True
             return
         workers = check_integer("workers", workers, minimum=1)
-        with _secured_local_cluster(LocalCluster, workers) as (cluster, security), \
+        with _secured_local_cluster(workers) as (cluster, security), \
                 Client(cluster, security=security) as client:
             _check_http_closed(cluster.scheduler, client)
             yield client.get_executor(pure=False), True
@@ -62,7 +63,7 @@ def executor_for(executor, threads, workers, scheduler):
 
 
 @contextlib.contextmanager
-def _secured_local_cluster(local_cluster, workers):
+def _secured_local_cluster(workers):
     """A ``LocalCluster`` of ``workers`` one-thread processes that only its own client can use.
 
     Every comm (scheduler, nannies, workers, client) is mutual TLS with a throw-away certificate
@@ -75,6 +76,7 @@ def _secured_local_cluster(local_cluster, workers):
     a running cluster's 8787) and closed as soon as the server has started (:func:`dask_setup`).
     """
     import dask
+    from distributed import LocalCluster
     from distributed.security import Security
 
     require("cryptography", "a Dask cluster started by modaluq (workers=), secured by TLS,")
@@ -82,7 +84,7 @@ def _secured_local_cluster(local_cluster, workers):
     no_http = {"distributed.scheduler.http.routes": [], "distributed.worker.http.routes": []}
     this_module = __name__  # the preload: dask_setup below, run by the scheduler and each worker it starts
     with dask.config.set(no_http):
-        cluster = local_cluster(
+        cluster = LocalCluster(
             n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1", protocol="tls",
             security=security, dashboard_address=None, preload=[this_module],
             scheduler_kwargs={"dashboard_address": "127.0.0.1:0", "preload": [this_module]})
