@@ -2,7 +2,8 @@
 
 - default: a thread pool in this process (the core releases the GIL; the BLAS runs on one thread);
 - a ``dask.distributed.Client`` (given, or active), a scheduler address, or a ``LocalCluster`` of
-  ``workers`` processes, through the client's ``concurrent.futures`` executor;
+  ``workers`` processes, through the client's ``concurrent.futures`` executor. A cluster started
+  here speaks mutual TLS only and serves no HTTP; one given keeps its own security (§2, security);
 - any other :class:`concurrent.futures.Executor` (e.g. a ``ProcessPoolExecutor``).
 
 A task that runs in another process sets that process up first (:func:`configure_worker_process`).
@@ -13,6 +14,7 @@ from __future__ import annotations
 import concurrent.futures
 import contextlib
 import os
+import socket
 import sys
 
 from ..checks import check_integer, require
@@ -43,20 +45,74 @@ def executor_for(executor, threads, workers, scheduler):
         return
     if workers is not None or scheduler is not None:
         require("distributed", "workers= or scheduler=")
-        from distributed import Client, LocalCluster
+        from distributed import Client
 
         if scheduler is not None:
             with Client(scheduler) as client:
                 yield client.get_executor(pure=False), True
             return
         workers = check_integer("workers", workers, minimum=1)
-        with LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None) \
-                as cluster, Client(cluster) as client:
+        with _secured_local_cluster(workers) as (cluster, security), \
+                Client(cluster, security=security) as client:
+            _check_http_closed(cluster.scheduler, client)
             yield client.get_executor(pure=False), True
         return
     threads = (os.cpu_count() or 1) if threads is None else check_integer("threads", threads, minimum=1)
     with concurrent.futures.ThreadPoolExecutor(max_workers=threads, thread_name_prefix="modaluq") as pool:
         yield pool, False
+
+
+@contextlib.contextmanager
+def _secured_local_cluster(workers):
+    """A ``LocalCluster`` of ``workers`` one-thread processes that only its own client can use.
+
+    Every comm (scheduler, nannies, workers, client) is mutual TLS with a throw-away certificate
+    that exists only in this process's memory and is handed to the workers it starts: another local
+    process cannot connect, let alone run code in the workers. Without ``cryptography`` no such
+    certificate can be made, and the cluster is refused rather than started in plain TCP.
+
+    Dask starts an HTTP server in the scheduler and in every worker even without a dashboard
+    (port 8787 by default): it is given no routes, bound to a random localhost port (no clash with
+    a running cluster's 8787) and closed as soon as the server has started (:func:`dask_setup`).
+    """
+    import dask
+    from distributed import LocalCluster
+    from distributed.security import Security
+
+    require("cryptography", "a Dask cluster started by modaluq (workers=), secured by TLS,")
+    security = Security.temporary()
+    no_http = {"distributed.scheduler.http.routes": [], "distributed.worker.http.routes": []}
+    this_module = __name__  # the preload: dask_setup below, run by the scheduler and each worker it starts
+    with dask.config.set(no_http):
+        cluster = LocalCluster(
+            n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1", protocol="tls",
+            security=security, dashboard_address=None, preload=[this_module],
+            scheduler_kwargs={"dashboard_address": "127.0.0.1:0", "preload": [this_module]})
+    with cluster:
+        yield cluster, security
+
+
+def dask_setup(server) -> None:
+    """Dask preload of the scheduler and workers modaluq starts: close the HTTP server Dask opened
+    (it serves nothing; see :func:`_secured_local_cluster`). Runs again in a restarted worker."""
+    server.http_server.stop()
+
+
+def _http_open(dask_worker=None, server=None) -> bool:
+    """Whether the HTTP port of a scheduler or worker still accepts connections."""
+    http = (server or dask_worker).http_server
+    with contextlib.suppress(OSError), socket.create_connection((http.address, http.port), timeout=2):
+        return True
+    return False
+
+
+def _check_http_closed(scheduler, client) -> None:
+    """Refuse a cluster whose preload did not close an HTTP server (Dask only logs a failed preload)."""
+    still_open = [scheduler.address] if _http_open(server=scheduler) else []
+    still_open += [address for address, is_open in client.run(_http_open).items() if is_open]
+    if still_open:
+        raise RuntimeError(f"the HTTP server of {', '.join(still_open)} could not be closed; "
+                           "modaluq does not run records on a cluster that serves HTTP")
 
 
 def cancel_queued(futures) -> None:

@@ -27,7 +27,9 @@ def test_results_do_not_depend_on_the_number_of_threads(serial, campaign):
 @pytest.fixture(scope="module")
 def dask_client():
     distributed = pytest.importorskip("distributed")
-    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) \
+    # the scheduler's HTTP server on a random port: Dask's default 8787 may be another cluster's (a warning)
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None,
+                                  scheduler_kwargs={"dashboard_address": "127.0.0.1:0"}) \
             as cluster, distributed.Client(cluster) as client:
         yield client
 
