@@ -136,7 +136,8 @@ def check_sampling_frequency(fs) -> float:
 
 
 #: optional dependency -> the extra of modaluq that installs it
-EXTRAS = {"xarray": "export", "netCDF4": "export", "distributed": "monitor", "zarr": "monitor", "pyarrow": "monitor"}
+EXTRAS = {"xarray": "export", "netCDF4": "export", "distributed": "monitor", "zarr": "monitor", "pyarrow": "monitor",
+          "cryptography": "monitor"}
 
 
 def require(module: str, purpose: str = "this"):

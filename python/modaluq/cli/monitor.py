@@ -167,7 +167,8 @@ def register(subparsers) -> argparse.ArgumentParser:
     x.add_argument("--threads", type=integer_option(1), default=None, metavar="N",
                    help="records at a time in this process (default: the cores)")
     x.add_argument("--workers", type=integer_option(1), default=None, metavar="N",
-                   help="start a Dask LocalCluster of N one-thread worker processes")
+                   help="start a Dask LocalCluster of N one-thread worker processes (TLS with throw-away "
+                        "certificates on 127.0.0.1, no HTTP server; docs/monitoring.md)")
     x.add_argument("--scheduler", default=None, metavar="ADDR", help="a running Dask scheduler, e.g. tcp://host:8786")
     g.add_argument("--settle-seconds", type=real_option(0, low_open=False), default=None, metavar="S",
                    help="a file modified less than S seconds before it is read is still being written: left "
