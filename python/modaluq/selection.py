@@ -130,8 +130,8 @@ class SelectedModes:
     block_too_short: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
     #: (n_modes,) bool, every pole of the mode's cluster is noise-coupled (``Diagram.noise_coupled``:
     #: no first-order σ, docs/uq-math.md §5.5): a column that may be noise, not a mode. Such a
-    #: cluster is still selected (a weak physical mode below the noise floor looks the same);
-    #: tables mark it, exports carry the flag.
+    #: cluster is still selected (a weak physical mode below the noise floor looks the same: the
+    #: simulated chain's 1.93 Hz mode on 20,000 samples); tables mark it, exports carry the flag.
     noise_coupled: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
     #: the identification's ``Result.low_signal_to_noise``: H is within 3 σ of its own estimation
     #: noise, so any of these modes may be noise (the table's heading says so)
@@ -141,8 +141,8 @@ class SelectedModes:
     LOW_SIGNAL_TO_NOISE_HEADING = ("H is within 3 std of its estimation noise: these modes cannot be told from "
                                    "noise and may all be noise")
     #: the legend line below a table that marks noise-coupled modes
-    NOISE_COUPLED_LEGEND = ("noise: every pole of the mode is noise-coupled (no first-order std): it may be "
-                            "noise, not a mode (docs/settings.md)")
+    NOISE_COUPLED_LEGEND = ("noise?: every pole of the mode is noise-coupled (below the noise floor of H, no "
+                            "first-order std): noise, or a mode too weak to tell from it (docs/settings.md)")
 
     @property
     def n_modes(self) -> int:
@@ -189,7 +189,7 @@ class SelectedModes:
 
     def table(self) -> str:
         """Plain-text table: f and ξ with their analytic σ and the spread across the cluster; a
-        mode every pole of which is noise-coupled is marked ``noise`` after its row, with a legend
+        mode every pole of which is noise-coupled is marked ``noise?`` after its row, with a legend
         line below (nothing is added when no mode is)."""
         head = (f"{'mode':>4}  {'f [Hz]':>9}  {'std f':>8}  {'spread f':>8}  {'xi [%]':>7}  "
                 f"{'std xi':>7}  {'spread xi':>9}  {'order':>5}  {'poles':>5}")
@@ -204,7 +204,7 @@ class SelectedModes:
                 f"{cell(self.frequency_spread[i], 8, 4)}  {100 * self.damping_ratio[i]:>7.3f}  "
                 f"{cell(100 * self.damping_std[i], 7, 3)}  {cell(100 * self.damping_spread[i], 9, 3)}  "
                 f"{int(self.representative_order[i]):>5}  {int(self.n_poles[i]):>5}"
-                + ("  noise" if flags[i] else ""))
+                + ("  noise?" if flags[i] else ""))
         if flags.any():
             lines.append(self.NOISE_COUPLED_LEGEND)
         return "\n".join(lines)
