@@ -1,9 +1,9 @@
 """``modaluq info FILE``: what a recording holds, before identifying it.
 
 Prints the file's groups, datasets or variables (TDMS, HDF5, MATLAB, ``.npz``), then the record
-as ``modaluq identify`` would read it with the same ``--format``, ``--read-option`` and ``--fs``:
-every channel with its unit and role (output or input), the sampling rate and the length in
-samples and seconds. Nothing is identified. A file the reader cannot take as is (an HDF5 file of
+as ``modaluq identify`` would read it with the same ``--format``, ``--read-option``, ``--fs`` and
+``--inputs``: every channel with its unit and role (output or input), the sampling rate and the
+length in samples and seconds. Nothing is identified. A file the reader cannot take as is (an HDF5 file of
 several datasets without ``--read-option dataset=...``) still gets its listing, then the reader's
 error on one line and exit status 2.
 """
@@ -64,8 +64,10 @@ def run(args) -> int:
             indent = "    " if it.kind == "channel" else "  "
             print(f"{indent}{it.kind} {it.name}: {it.detail}")
     sys.stdout.flush()  # the listing stands even when the reader refuses the file below
-    shown = " ".join(f"--read-option {o}" for o in args.read_option or [])
-    rec = load(args.file, fs=args.fs, format=args.format, **read_options)
+    shown = " ".join([f"--read-option {o}" for o in args.read_option or []]
+                     + ([f"--inputs {' '.join(args.inputs)}"] if args.inputs else []))
+    inputs = [int(c) if c.lstrip("-").isdigit() else c for c in args.inputs] if args.inputs else None
+    rec = load(args.file, fs=args.fs, format=args.format, inputs=inputs, **read_options)
     print("read as modaluq identify reads it" + (f" ({shown})" if shown else "") + ":")
     print("\n".join(describe_recording(rec)))
     return 0
@@ -90,5 +92,8 @@ def register(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--read-option", action="append", metavar="KEY=VALUE", default=None,
                    help="option of the file reader, as for modaluq identify (dataset=/daq/acc, variable=acc, "
                         "group=run1, time_column=clock); repeat for several")
+    p.add_argument("--inputs", nargs="+", metavar="CH", default=None,
+                   help="known-input channels by name or index, as for modaluq identify (default: those the "
+                        "file declares)")
     p.set_defaults(func=run)
     return p

@@ -62,10 +62,10 @@ def test_info_on_csv_needs_the_rate_as_identify_does(tmp_path, capsys):
     path = tmp_path / "run.csv"
     np.savetxt(path, np.random.default_rng(0).standard_normal((500, 2)), delimiter=",",
                header="acc [m/s^2],force [N]", comments="", fmt="%.6g")
-    status, out, err = info(capsys, path, "--fs", 100)
+    status, out, err = info(capsys, path, "--fs", 100, "--inputs", "force")
     assert status == 0, err
     assert "rate: 100 Hz" in out and "length: 500 samples (5 s)" in out
-    assert "acc" in out and "m/s^2" in out
+    assert "acc    m/s^2  output" in out and "force  N      input" in out
 
 
 def test_info_lists_an_hdf5_file_it_cannot_read_as_is_then_fails_in_one_line(tmp_path, capsys):
