@@ -39,7 +39,7 @@ EXTENSIONS = {".json": "json", ".csv": "csv", ".nc": "netcdf", ".nc4": "netcdf"}
 def selected_modes_to_dict(selected) -> dict:
     """:class:`~modaluq.SelectedModes` as plain Python (JSON-ready): one dict per mode, shapes per channel."""
     num = finite_or_none
-    noise_coupled = selected._noise_coupled()
+    noise_coupled = selected.noise_coupled
     modes = []
     for i in range(selected.n_modes):
         shape = {}
@@ -119,7 +119,7 @@ def diagram_to_xarray(diagram, selected=None, attrs: dict | None = None):
                      "frequency_spread", "damping_spread", "representative_order",
                      "representative_pole", "n_poles", "order_min", "order_max", "min_mac"):
             pole_vars[f"selected_{name}"] = (("mode",), getattr(sel, name), {})
-        pole_vars["selected_noise_coupled"] = (("mode",), sel._noise_coupled().astype(np.int8),
+        pole_vars["selected_noise_coupled"] = (("mode",), np.asarray(sel.noise_coupled, np.int8),
                                                {"long_name": "every pole of the mode is noise-coupled: it may be "
                                                              "noise, not a mode"})
         for name, values in (("mode_shape_real", sel.mode_shape.real), ("mode_shape_imag", sel.mode_shape.imag),

@@ -144,6 +144,13 @@ class SelectedModes:
     NOISE_COUPLED_LEGEND = ("noise?: every pole of the mode is noise-coupled (below the noise floor of H, no "
                             "first-order std): noise, or a mode too weak to tell from it (docs/settings.md)")
 
+    def __post_init__(self):
+        # one flag per mode; unknown (a SelectedModes made by hand without it): none flagged
+        flags = np.asarray(self.noise_coupled, bool)
+        if flags.shape != np.shape(self.frequency_hz):
+            flags = np.zeros(np.shape(self.frequency_hz), bool)
+        object.__setattr__(self, "noise_coupled", flags)
+
     @property
     def n_modes(self) -> int:
         return int(self.frequency_hz.size)
@@ -166,7 +173,7 @@ class SelectedModes:
             "damping_spread": self.damping_spread,
             "representative_order": self.representative_order, "n_poles": self.n_poles,
             "order_min": self.order_min, "order_max": self.order_max, "min_mac": self.min_mac,
-            "noise_coupled": self._noise_coupled(),
+            "noise_coupled": self.noise_coupled,
             "low_signal_to_noise": np.full(self.n_modes, bool(self.low_signal_to_noise)),
         }
         for k, name in enumerate(self.output_names):
@@ -182,11 +189,6 @@ class SelectedModes:
 
         return selected_modes_to_dict(self)
 
-    def _noise_coupled(self) -> np.ndarray:
-        """:attr:`noise_coupled`, all False when unknown (a SelectedModes made by hand)."""
-        flags = np.asarray(self.noise_coupled, bool)
-        return flags if flags.shape == (self.n_modes,) else np.zeros(self.n_modes, bool)
-
     def table(self) -> str:
         """Plain-text table: f and ξ with their analytic σ and the spread across the cluster; a
         mode every pole of which is noise-coupled is marked ``noise?`` after its row, with a legend
@@ -197,7 +199,7 @@ class SelectedModes:
             return f"{x:>{width}.{digits}f}" if np.isfinite(x) else f"{'-':>{width}}"
 
         lines = [head]
-        flags = self._noise_coupled()
+        flags = self.noise_coupled
         for i in range(self.n_modes):
             lines.append(
                 f"{i + 1:>4}  {self.frequency_hz[i]:>9.4f}  {cell(self.frequency_std[i], 8, 4)}  "
@@ -325,8 +327,9 @@ def select_modes(diagram, settings: ClusteringSettings | None = None, **kwargs) 
         max_frequency_std_per_bandwidth=float(sel.max_frequency_std_per_bandwidth),
         frequency_damping_correlation=sel.frequency_damping_correlation,
         block_too_short=np.asarray(sel.block_too_short, bool),
-        noise_coupled=np.array([bool(np.all(np.asarray(diagram.noise_coupled, bool)[np.asarray(m, np.int64)]))
-                                and len(m) > 0 for m in sel.members], dtype=bool).reshape(-1),
+        # from the diagram's per-pole flags: every member of the cluster noise-coupled
+        noise_coupled=np.array([m.size > 0 and bool(np.asarray(diagram.noise_coupled, bool)[m].all())
+                                for m in (np.asarray(m, np.int64) for m in sel.members)], dtype=bool),
         low_signal_to_noise=bool(getattr(diagram, "low_signal_to_noise", False)),
     )
     # the words from the codes and numbers (the core's own words are for its C++ users)
