@@ -37,10 +37,11 @@ if [[ ! -x "$venv/bin/python" ]]; then
 fi
 "$venv/bin/python" -m pip install -q --upgrade pip
 
-# The C++ extension takes 3-6 minutes and about 2.5 GB of memory to compile; show its steps
-# instead of minutes of silence, and keep the whole log for when it fails.
+# The C++ extension takes minutes to compile (on a fresh Debian machine, a peak of ~4.3 GB of memory
+# with several compilers at once, single steps of 6-9 minutes: README.md); show its steps and a
+# heartbeat instead of minutes of silence, and keep the whole log for when it fails.
 log="$venv/modaluq-build.log"
-echo "== building and installing modaluq[$extras] (the C++ extension takes 3-6 minutes; log: $log)"
+echo "== building and installing modaluq[$extras] (the C++ extension takes several minutes; log: $log)"
 native=()
 if [[ "${MODALUQ_NATIVE:-OFF}" == "ON" ]]; then native=(-Ccmake.define.MODALUQ_NATIVE=ON); fi
 # The build tools live in the venv and the build reuses build/ (pyproject.toml's build-dir), so
@@ -50,11 +51,24 @@ if [[ "${MODALUQ_NATIVE:-OFF}" == "ON" ]]; then native=(-Ccmake.define.MODALUQ_N
 : >"$log"  # exists before tail follows it, and holds only this build
 "$venv/bin/python" -m pip install -v --no-build-isolation ".[$extras]" "${native[@]}" >"$log" 2>&1 </dev/null &
 pid=$!
-trap 'kill "$pid" 2>/dev/null' EXIT  # a killed setup leaves no compiler running
+# Heartbeat: one compile step can run for minutes without a line of its own.
+started=$(date +%s)
+(
+  while sleep 30 && kill -0 "$pid" 2>/dev/null; do
+    elapsed=$(( $(date +%s) - started ))
+    printf '   ... still compiling (%d min %02d s)\n' $((elapsed / 60)) $((elapsed % 60))
+  done
+) &
+heartbeat=$!
+trap 'kill "$pid" "$heartbeat" 2>/dev/null' EXIT  # a killed setup leaves no compiler running
 # Progress: the build's own [k/n] lines as they appear.
 tail -n +1 -f "$log" --pid="$pid" 2>/dev/null | grep --line-buffered -E '^\s*\[ *[0-9]+(/[0-9]+|%)\] (Building|Linking)' \
   | sed -u -E 's/^\s*/   /; s/ (CXX|object|shared module) / /g' || true
-if ! wait "$pid"; then
+status=0
+wait "$pid" || status=$?
+kill "$heartbeat" 2>/dev/null || true
+wait "$heartbeat" 2>/dev/null || true
+if ((status)); then
   trap - EXIT
   echo "pip install failed; the last lines of $log:" >&2
   tail -n 40 "$log" >&2

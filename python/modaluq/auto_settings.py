@@ -23,6 +23,11 @@ outputs, f_low the band's lower edge):
    (2 l + 3 blocks give every mode's joint covariance full rank), and at most as many as hold
    BLOCK_SPAN (p + q) columns each. A record too short for that gets the minimum and the core's
    ``block_too_short`` warning says so.
+
+A record shorter than :func:`minimum_samples` is refused (``ValueError`` naming the minimum):
+it cannot hold the smallest automatic identification, block_rows p = max(2, 1 + ceil(MIN_ORDER / l))
+and two blocks, each of at least BLOCK_SPAN (p + q) columns and as many columns as H has rows
+(p l): with fewer, a block's covariance is rank-deficient and no σ can be estimated.
 """
 
 from __future__ import annotations
@@ -33,7 +38,7 @@ from dataclasses import dataclass
 from .checks import check_integer, check_real, check_sampling_frequency
 
 __all__ = ["ChosenSettings", "choose_settings", "LAG_PERIODS", "CENTRE_PERIODS", "MAX_ROWS", "MAX_ORDER", "MIN_ORDER",
-           "XI_REF", "MIN_BLOCKS", "MAX_BLOCKS"]
+           "XI_REF", "MIN_BLOCKS", "MAX_BLOCKS", "minimum_samples"]
 
 LAG_PERIODS = 2.0   #: periods of the lowest frequency of interest spanned by the lags
 CENTRE_PERIODS = 10.0  #: periods of the band's geometric centre spanned by the lags
@@ -76,6 +81,18 @@ def centre_frequency(fs: float, frequency_range=None) -> float:
     return math.sqrt(f_low * max(f_high, f_low))
 
 
+def minimum_samples(n_outputs: int) -> int:
+    """Fewest samples of a record the automatic settings identify (module docstring): block_rows
+    p = max(2, 1 + ceil(MIN_ORDER / l)) = q, and 2 blocks of max(BLOCK_SPAN (p + q), p l) columns.
+
+    >>> minimum_samples(1), minimum_samples(3), minimum_samples(6)
+    (209, 79, 69)
+    """
+    l = check_integer("n_outputs", n_outputs, minimum=1)
+    p = max(2, 1 + math.ceil(MIN_ORDER / l))
+    return 2 * p - 1 + 2 * max(BLOCK_SPAN * 2 * p, p * l)
+
+
 def choose_settings(n_samples: int, fs: float, n_outputs: int, *, frequency_range=None,
                     n_references: int | None = None, block_rows: int | None = None,
                     orders=None, n_blocks: int | None = None) -> ChosenSettings:
@@ -98,6 +115,11 @@ def choose_settings(n_samples: int, fs: float, n_outputs: int, *, frequency_rang
     reasons = []
     nb_min = max(MIN_BLOCKS, 2 * l + 3)
     if block_rows is None:
+        n_min = minimum_samples(l)
+        if n_samples < n_min:
+            raise ValueError(f"the record has {n_samples} samples, too short for any identification with {l} "
+                             f"output{'s' if l > 1 else ''}: at least {n_min} are needed (docs/settings.md, automatic "
+                             "settings); record longer, or give block_rows explicitly")
         f_centre = centre_frequency(fs, frequency_range)
         centre_lags = CENTRE_PERIODS / f_centre if frequency_range is not None else 0.0
         p_want = math.ceil(max(LAG_PERIODS / f_low, centre_lags) * fs - 1e-9)

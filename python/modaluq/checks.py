@@ -67,6 +67,29 @@ def as_samples(x, name: str, *, allow_none: bool = False, n_channels: int | None
     return np.ascontiguousarray(arr, dtype=np.float64)
 
 
+def constant_channels(x) -> list[int]:
+    """Columns of a ``(n_samples, n_channels)`` array whose samples are all equal (an all-zero or
+    constant channel: a dead or disconnected sensor, which carries no dynamics)."""
+    x = np.asarray(x)
+    if x.ndim != 2 or x.shape[0] == 0:
+        return []
+    return np.flatnonzero(np.all(x == x[:1], axis=0)).tolist()
+
+
+def constant_channel_warning(x, names, what: str) -> str | None:
+    """The warning naming the constant channels of ``x`` (``names`` one per column, ``what``
+    ``"output"`` or ``"input"``), or None when there is none."""
+    dead = constant_channels(x)
+    if not dead:
+        return None
+    names = list(names) if len(names) == np.shape(x)[1] else [f"{what[0]}{k}" for k in range(np.shape(x)[1])]
+    listed = ", ".join(f"{names[k]!r} (all samples {float(np.asarray(x)[0, k]):g})" for k in dead)
+    return (f"{what} channel{'s' if len(dead) > 1 else ''} {listed} "
+            f"{'are' if len(dead) > 1 else 'is'} constant: a dead or disconnected sensor? "
+            f"{'They carry' if len(dead) > 1 else 'It carries'} no dynamics (mode shape entries 0); "
+            f"leave {'them' if len(dead) > 1 else 'it'} out of the {what}s")
+
+
 def check_boolean(name, value) -> bool:
     # bool("False") is True: a string or a number where a switch is expected is a mistake.
     if not isinstance(value, (bool, np.bool_)):

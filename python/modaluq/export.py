@@ -39,6 +39,7 @@ EXTENSIONS = {".json": "json", ".csv": "csv", ".nc": "netcdf", ".nc4": "netcdf"}
 def selected_modes_to_dict(selected) -> dict:
     """:class:`~modaluq.SelectedModes` as plain Python (JSON-ready): one dict per mode, shapes per channel."""
     num = finite_or_none
+    noise_coupled = selected.noise_coupled
     modes = []
     for i in range(selected.n_modes):
         shape = {}
@@ -59,6 +60,8 @@ def selected_modes_to_dict(selected) -> dict:
             "representative_order": int(selected.representative_order[i]),
             "n_poles": int(selected.n_poles[i]), "order_min": int(selected.order_min[i]),
             "order_max": int(selected.order_max[i]), "min_mac": num(selected.min_mac[i]),
+            # every pole noise-coupled: may be noise, not a mode (SelectedModes.noise_coupled)
+            "noise_coupled": bool(noise_coupled[i]),
             "mode_shape": shape,
         })
     return {
@@ -67,6 +70,8 @@ def selected_modes_to_dict(selected) -> dict:
                              for f, n, r in zip(selected.dropped_frequency_hz, selected.dropped_n_poles,
                                                 selected.dropped_reason)],
         "min_cluster_size": int(selected.min_cluster_size),
+        # H within 3 std of its estimation noise: every mode may be noise (SelectedModes.low_signal_to_noise)
+        "low_signal_to_noise": bool(selected.low_signal_to_noise),
         "clustering": selected.settings.to_dict(),
     }
 
@@ -114,6 +119,9 @@ def diagram_to_xarray(diagram, selected=None, attrs: dict | None = None):
                      "frequency_spread", "damping_spread", "representative_order",
                      "representative_pole", "n_poles", "order_min", "order_max", "min_mac"):
             pole_vars[f"selected_{name}"] = (("mode",), getattr(sel, name), {})
+        pole_vars["selected_noise_coupled"] = (("mode",), np.asarray(sel.noise_coupled, np.int8),
+                                               {"long_name": "every pole of the mode is noise-coupled: it may be "
+                                                             "noise, not a mode"})
         for name, values in (("mode_shape_real", sel.mode_shape.real), ("mode_shape_imag", sel.mode_shape.imag),
                              ("mode_shape_std_real", sel.mode_shape_std_real),
                              ("mode_shape_std_imag", sel.mode_shape_std_imag),
@@ -126,6 +134,8 @@ def diagram_to_xarray(diagram, selected=None, attrs: dict | None = None):
               "identification_settings": dumps(diagram.result_settings)}
     if selected is not None:
         gattrs["clustering"] = dumps(selected.settings.to_dict())
+        # H within 3 std of its estimation noise: the modes cannot be told from noise
+        gattrs["low_signal_to_noise"] = int(bool(selected.low_signal_to_noise))
     for k, v in (attrs or {}).items():
         gattrs[k] = v if isinstance(v, (str, int, float)) else dumps(v)
     ds.attrs.update(gattrs)
@@ -150,10 +160,15 @@ def report(diagram, selected, *, stamp: dict | None = None, extra: dict | None =
         }
     sel = selected.to_dict()
     out["clustering"] = {k: sel[k] for k in ("clustering", "min_cluster_size", "dropped_clusters")}
+    out["low_signal_to_noise"] = sel["low_signal_to_noise"]
     out["units"] = {"frequency_hz": "Hz", "damping_ratio": "fraction (0.02 = 2 %)",
                     "std": "analytic (delta-method) standard deviation, median over the poles of the mode's cluster "
                            "that are not noise-coupled and not at a close cut",
                     "spread": "sample standard deviation across the poles of the mode's cluster",
+                    "noise_coupled": "every pole of the mode's cluster is noise-coupled (no first-order std): it "
+                                     "may be noise, not a mode",
+                    "low_signal_to_noise": "H is within 3 std of its estimation noise: the modes cannot be told "
+                                           "from noise",
                     "mode_shape": "normalised: largest-modulus component = 1"}
     out["modes"] = sel["modes"]
     return jsonable(out)

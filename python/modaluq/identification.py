@@ -15,7 +15,7 @@ import numpy as np
 from . import _core
 from ._blas import single_threaded as single_threaded_blas
 from .auto_settings import capped_lag_warning, choose_settings, lag_warning
-from .checks import as_samples, check_sampling_frequency
+from .checks import as_samples, check_sampling_frequency, constant_channel_warning, constant_channels
 from .preprocess import preprocess
 from .results import Result, result_from_core, warn_all
 from .settings import Settings
@@ -141,6 +141,12 @@ def identify_quietly(y, u=None, *, fs: float, settings: Settings | None = None,
     u = as_samples(u, "u", allow_none=True)
     if u is not None and u.shape[0] != y.shape[0]:
         raise ValueError(f"u must have as many samples as y ({y.shape[0]}); got {u.shape[0]}")
+    # dead sensors, as recorded (before any filter): the core identifies around them without a word
+    dead = [w for w in (constant_channel_warning(y, names or [f"y{k}" for k in range(y.shape[1])], "output"),
+                        None if u is None else constant_channel_warning(u, [f"u{k}" for k in range(u.shape[1])],
+                                                                        "input")) if w]
+    if len(constant_channels(y)) == y.shape[1]:
+        raise ValueError(f"every output is constant: {dead[0]}; nothing to identify")
     pre = None
     if s.preprocessing:
         pre = preprocess(y, u, fs=fs, **s.preprocessing)
@@ -162,7 +168,7 @@ def identify_quietly(y, u=None, *, fs: float, settings: Settings | None = None,
         record["preprocessing"] = pre.settings()
     if chosen is not None:
         record["chosen"] = list(chosen.reasons)
-    extra = []
+    extra = list(dead)
     if chosen is None or not any(r.startswith("block_rows") for r in chosen.reasons):
         lag = lag_warning(s.block_rows, fs, band)
         if lag:

@@ -63,6 +63,21 @@ SPECTRUM_DECADES_FLOOR = 1e-6
 MIN_BAND_FRACTION = 0.004
 
 
+def _check_identified_record(diagram, y) -> None:
+    """Refuse a ``y`` that is not the record the diagram was identified from (by its length)."""
+    n_identified = int(getattr(diagram, "n_samples", 0) or 0)
+    shape = np.shape(y)
+    if not n_identified or not shape or shape[0] == n_identified:
+        return
+    steps = (getattr(diagram, "result_settings", None) or {}).get("preprocessing", {}).get("steps", [])
+    how = f" ({'; '.join(steps)})" if steps else ""
+    raise ValueError(
+        f"y has {shape[0]} samples but the diagram was identified from a record of {n_identified} samples at "
+        f"{diagram.fs:g} Hz{how}: its spectrum would be drawn at the wrong frequencies. Pass the record "
+        "identified (Analysis.preprocessed.y, or modaluq.preprocess.preprocess(y, fs=..., frequency_range=...).y), "
+        "or spectrum=modaluq.spectrum.output_spectrum_singular_values(y, fs_of_y) for the raw record")
+
+
 def plot_stabilization_diagram(diagram, ax=None, *, y=None, spectrum=None, selected=None, show_rejected=True,
                                nperseg=None, frequency_range=None, figsize=DIAGRAM_FIGSIZE):
     """Stabilization diagram: every pole at (frequency, model order) with ±σ_f horizontal bars.
@@ -80,7 +95,13 @@ def plot_stabilization_diagram(diagram, ax=None, *, y=None, spectrum=None, selec
     ax : matplotlib.axes.Axes, optional
         Where to draw; a new figure when None.
     y : array_like, shape (n_samples, n_outputs), optional
-        Output samples of the identification, for the spectrum background.
+        Output samples of the identification, for the spectrum background: the record
+        identified, after any window or decimation (``Analysis.preprocessed.y``,
+        ``modaluq.preprocess.preprocess(...).y``), drawn at the diagram's ``fs``. A ``y`` whose length
+        differs from the identified record's (``diagram.n_samples``) raises ``ValueError``: its
+        spectrum at the diagram's rate would put every peak at the wrong frequency (a raw record
+        that ``identify(..., frequency_range=...)`` decimated). Draw a raw record with
+        ``spectrum=output_spectrum_singular_values(raw, fs_raw)`` instead.
     spectrum : tuple (frequency_hz, singular_values), optional
         A precomputed :func:`~modaluq.spectrum.output_spectrum_singular_values` (instead of ``y``).
     selected : modaluq.SelectedModes, optional
@@ -113,6 +134,7 @@ def plot_stabilization_diagram(diagram, ax=None, *, y=None, spectrum=None, selec
 
     spec_ax = None
     if y is not None:
+        _check_identified_record(diagram, y)
         spectrum = output_spectrum_singular_values(y, diagram.fs, nperseg=nperseg)
     if spectrum is not None:
         freq, sv = (np.asarray(a) for a in spectrum)

@@ -128,6 +128,28 @@ class SelectedModes:
     #: (n_modes,) bool, the blocks are shorter than half the representative pole's decay time
     #: 1/(2π f ξ) (the core's ``block_too_short``): its σ are less reliable
     block_too_short: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
+    #: (n_modes,) bool, every pole of the mode's cluster is noise-coupled (``Diagram.noise_coupled``:
+    #: no first-order σ, docs/uq-math.md §5.5): a column that may be noise, not a mode. Such a
+    #: cluster is still selected (a weak physical mode below the noise floor looks the same: the
+    #: simulated chain's 1.93 Hz mode on 20,000 samples); tables mark it, exports carry the flag.
+    noise_coupled: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
+    #: the identification's ``Result.low_signal_to_noise``: H is within 3 σ of its own estimation
+    #: noise, so any of these modes may be noise (the table's heading says so)
+    low_signal_to_noise: bool = False
+
+    #: the heading of :meth:`__str__` when :attr:`low_signal_to_noise`
+    LOW_SIGNAL_TO_NOISE_HEADING = ("H is within 3 std of its estimation noise: these modes cannot be told from "
+                                   "noise and may all be noise")
+    #: the legend line below a table that marks noise-coupled modes
+    NOISE_COUPLED_LEGEND = ("noise?: every pole of the mode is noise-coupled (below the noise floor of H, no "
+                            "first-order std): noise, or a mode too weak to tell from it (docs/settings.md)")
+
+    def __post_init__(self):
+        # one flag per mode; unknown (a SelectedModes made by hand without it): none flagged
+        flags = np.asarray(self.noise_coupled, bool)
+        if flags.shape != np.shape(self.frequency_hz):
+            flags = np.zeros(np.shape(self.frequency_hz), bool)
+        object.__setattr__(self, "noise_coupled", flags)
 
     @property
     def n_modes(self) -> int:
@@ -139,7 +161,9 @@ class SelectedModes:
     def to_dataframe(self):
         """One row per mode, numbered from 1 (the index ``mode``, as in every table, plot and
         export): f, σ_f, spread, ξ, σ_ξ, spread, cluster size and orders, and the shape per
-        channel in columns ``mode_shape_<channel>_real`` ...."""
+        channel in columns ``mode_shape_<channel>_real`` ...; ``noise_coupled`` flags a mode every
+        pole of which is noise-coupled (:attr:`noise_coupled`), ``low_signal_to_noise`` (the same
+        in every row) an identification whose modes cannot be told from noise."""
         import pandas as pd
 
         data = {
@@ -149,6 +173,8 @@ class SelectedModes:
             "damping_spread": self.damping_spread,
             "representative_order": self.representative_order, "n_poles": self.n_poles,
             "order_min": self.order_min, "order_max": self.order_max, "min_mac": self.min_mac,
+            "noise_coupled": self.noise_coupled,
+            "low_signal_to_noise": np.full(self.n_modes, bool(self.low_signal_to_noise)),
         }
         for k, name in enumerate(self.output_names):
             data[f"mode_shape_{name}_real"] = self.mode_shape[k].real
@@ -164,23 +190,32 @@ class SelectedModes:
         return selected_modes_to_dict(self)
 
     def table(self) -> str:
-        """Plain-text table: f and ξ with their analytic σ and the spread across the cluster."""
+        """Plain-text table: f and ξ with their analytic σ and the spread across the cluster; a
+        mode every pole of which is noise-coupled is marked ``noise?`` after its row, with a legend
+        line below (nothing is added when no mode is)."""
         head = (f"{'mode':>4}  {'f [Hz]':>9}  {'std f':>8}  {'spread f':>8}  {'xi [%]':>7}  "
                 f"{'std xi':>7}  {'spread xi':>9}  {'order':>5}  {'poles':>5}")
         def cell(x, width, digits):
             return f"{x:>{width}.{digits}f}" if np.isfinite(x) else f"{'-':>{width}}"
 
         lines = [head]
+        flags = self.noise_coupled
         for i in range(self.n_modes):
             lines.append(
                 f"{i + 1:>4}  {self.frequency_hz[i]:>9.4f}  {cell(self.frequency_std[i], 8, 4)}  "
                 f"{cell(self.frequency_spread[i], 8, 4)}  {100 * self.damping_ratio[i]:>7.3f}  "
                 f"{cell(100 * self.damping_std[i], 7, 3)}  {cell(100 * self.damping_spread[i], 9, 3)}  "
-                f"{int(self.representative_order[i]):>5}  {int(self.n_poles[i]):>5}")
+                f"{int(self.representative_order[i]):>5}  {int(self.n_poles[i]):>5}"
+                + ("  noise?" if flags[i] else ""))
+        if flags.any():
+            lines.append(self.NOISE_COUPLED_LEGEND)
         return "\n".join(lines)
 
     def __str__(self) -> str:
         s = f"{self.n_modes} modes (std: analytic, median over the cluster; spread: across the cluster)\n"
+        if self.low_signal_to_noise:
+            s = f"{self.n_modes} modes ({self.LOW_SIGNAL_TO_NOISE_HEADING}; std: analytic, median over the " \
+                "cluster; spread: across the cluster)\n"
         s += self.table()
         if self.dropped_n_poles.size:
             # counted by the core's code of each
@@ -235,6 +270,8 @@ def select_modes(diagram, settings: ClusteringSettings | None = None, **kwargs) 
        ``damping_std`` reported are the **median over the cluster's reliable poles** (not at
        a close cut, not noise-coupled), so that they do not depend on the order the mode is
        read at; the ``*_spread`` beside them is how much the estimate moves with the order.
+    7. a mode every member of which is noise-coupled is flagged (:attr:`SelectedModes.noise_coupled`,
+       from ``Diagram.noise_coupled`` of its members), not dropped: the selection does not change.
 
     Noise-coupled poles (``Diagram.noise_coupled``, docs/uq-math.md §5.5) are clustered (a weak
     physical mode below the noise floor has them at every order) but never give the σ.
@@ -290,6 +327,10 @@ def select_modes(diagram, settings: ClusteringSettings | None = None, **kwargs) 
         max_frequency_std_per_bandwidth=float(sel.max_frequency_std_per_bandwidth),
         frequency_damping_correlation=sel.frequency_damping_correlation,
         block_too_short=np.asarray(sel.block_too_short, bool),
+        # from the diagram's per-pole flags: every member of the cluster noise-coupled
+        noise_coupled=np.array([m.size > 0 and bool(np.asarray(diagram.noise_coupled, bool)[m].all())
+                                for m in (np.asarray(m, np.int64) for m in sel.members)], dtype=bool),
+        low_signal_to_noise=bool(getattr(diagram, "low_signal_to_noise", False)),
     )
     # the words from the codes and numbers (the core's own words are for its C++ users)
     reasons = tuple(dropped_reason_text(modes, k) for k in range(len(modes.dropped_code)))

@@ -120,6 +120,12 @@ class Diagram:
     #: (n_poles,) bool, the blocks are shorter than half the pole's decay time (``Modes.block_too_short``);
     #: empty when unknown
     block_too_short: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
+    #: samples of the record identified (``Result.n_samples``: after any window or decimation);
+    #: a ``y`` given to :meth:`plot` must have as many (0: unknown, not checked)
+    n_samples: int = 0
+    #: the identification's ``Result.low_signal_to_noise``: H is at the level of its own estimation
+    #: noise, the modes cannot be told from noise (the tables of the selected modes say so)
+    low_signal_to_noise: bool = False
 
     @property
     def n_poles(self) -> int:
@@ -283,6 +289,8 @@ def stabilization_diagram(result, criteria: StabilityCriteria | None = None, *,
         fs=float(result.fs), output_names=names, criteria=criteria, has_uncertainty=has_std,
         result_settings=dict(result.settings),
         frequency_damping_correlation=p.frequency_damping_correlation, block_too_short=p.block_too_short,
+        n_samples=int(getattr(result, "n_samples", 0)),
+        low_signal_to_noise=bool(getattr(result, "low_signal_to_noise", False)),
     )
     object.__setattr__(diagram, "_core_diagram", d)
     return diagram

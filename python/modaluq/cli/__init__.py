@@ -10,7 +10,7 @@ import os
 import sys
 
 from ..version import __version__
-from . import demo, identify, monitor, validate
+from . import demo, identify, info, monitor, validate
 from .common import Parser
 
 __all__ = ["build_parser", "main"]
@@ -25,7 +25,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--version", action="version", version=f"modaluq {__version__}")
     sub = p.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
-    for command in (demo, identify, monitor, validate):
+    for command in (demo, identify, info, monitor, validate):
         command.register(sub)
     return p
 
