@@ -207,6 +207,8 @@ def monitor(records, *, out=None, settings: Settings | None = None, criteria: St
                         read={k: v for k, v in dict(fs=fs, format=format, read_options=read_options, outputs=outputs,
                                                     inputs=inputs, references=references).items() if v is not None})
     out_paths = store.output_paths(out, poles)
+    if out_paths:  # a store a killed writer left half swapped is put back; dead writers' temporaries removed
+        store.recover(out_paths)
     tasks = record_tasks(records, covariates)
     parts = Parts(out_paths["parts"], config, start_again=not resume) if out_paths else None
 
