@@ -52,9 +52,9 @@ def csv_safe(frame):
     :func:`csv_cell`; numeric columns untouched. What every ``to_csv`` of the package writes."""
     out = frame.copy()
     for name in out.columns:
-        if out[name].dtype == object or str(out[name].dtype) == "string":
+        if out[name].dtype.kind not in "biufcmM":  # text (object or string dtype): numbers and times as they are
             out[name] = out[name].map(csv_cell)
-    if out.index.dtype == object:
+    if out.index.dtype.kind not in "biufcmM":
         out.index = out.index.map(csv_cell)
     return out
 
@@ -140,7 +140,7 @@ def commit(tmp, path) -> Path:
             try:
                 os.rename(tmp, path)
                 break
-            except OSError as exc:  # ENOTEMPTY / EEXIST: a concurrent writer's output is there now
+            except OSError:  # ENOTEMPTY / EEXIST: a concurrent writer's output is there now
                 if not path.exists():
                     raise
         else:
