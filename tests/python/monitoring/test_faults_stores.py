@@ -207,7 +207,6 @@ from pathlib import Path
 from modaluq.monitoring import store
 a, b = pickle.loads(Path(sys.argv[1]).read_bytes())
 paths = store.output_paths(sys.argv[2], None)
-store.recover(paths)
 print("ready", flush=True)
 for i in range(int(sys.argv[3])):
     store.write((a, b)[(i + int(sys.argv[4])) % 2], paths)
