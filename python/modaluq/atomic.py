@@ -171,6 +171,8 @@ def write_atomically(path, writer) -> Path:
 def _alive(pid: int) -> bool:
     if pid == os.getpid():
         return False  # a leftover of a dead process that had our pid: we write one output at a time
+    if os.name == "nt":
+        return True  # Windows' os.kill(pid, 0) would end the process: a leftover there is left alone
     try:
         os.kill(pid, 0)
     except ProcessLookupError:
