@@ -9,6 +9,11 @@
   stabilization diagram, every pole with status, reason and σ, plus the selected modes, with
   the stamp as global attributes.
 
+Each file is written to a temporary beside it and renamed into place once complete
+(:mod:`modaluq.atomic`): an earlier file of that name is replaced whole or left as it was, and a
+failed write (full disk) raises :class:`OSError` naming the file. CSV text cells that a
+spreadsheet would run as a formula are escaped (:func:`modaluq.atomic.csv_cell`).
+
 Every conversion of a result to a file format lives here (``Diagram.to_xarray`` and
 ``SelectedModes.to_dict`` call it).
 
@@ -24,6 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .atomic import csv_safe, write_atomically
 from .checks import require
 from .jsonvalues import dumps, finite_or_none, jsonable
 from .provenance import file_sha256, provenance
@@ -178,24 +184,20 @@ def write_json(path, diagram, selected, *, stamp: dict | None = None, extra: dic
     """Write :func:`report` to ``path`` as indented UTF-8 JSON; return the path."""
     path = Path(path)
     text = dumps(report(diagram, selected, stamp=stamp, extra=extra), indent=2)
-    path.write_text(text + "\n", encoding="utf-8")
-    return path
+    return write_atomically(path, lambda tmp: tmp.write_text(text + "\n", encoding="utf-8"))
 
 
 def write_csv(path, selected) -> Path:
     """Write the selected modes (one row each, with σ and spread) as CSV; return the path."""
-    path = Path(path)
-    selected.to_dataframe().to_csv(path, index=True)  # the index is the mode number, from 1
-    return path
+    table = csv_safe(selected.to_dataframe())
+    return write_atomically(path, lambda tmp: table.to_csv(tmp, index=True))  # the index: the mode number, from 1
 
 
 def write_netcdf(path, diagram, selected=None, *, stamp: dict | None = None) -> Path:
     """Write the full diagram (every pole, status, reason, σ) and the selected modes to NetCDF-4."""
     require("netCDF4", "writing NetCDF")  # xarray's own message would name an "engine", not the package
-    path = Path(path)
     ds = diagram.to_xarray(selected, attrs={"stamp": dumps(stamp or provenance())})
-    ds.to_netcdf(path, engine="netcdf4")
-    return path
+    return write_atomically(path, lambda tmp: ds.to_netcdf(tmp, engine="netcdf4"))
 
 
 def write(path, diagram, selected, *, stamp: dict | None = None, extra: dict | None = None) -> Path:

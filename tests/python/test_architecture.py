@@ -19,7 +19,7 @@ PACKAGE = pathlib.Path(__file__).resolve().parents[2] / "python" / "modaluq"
 #: subpackage. A module may import modules of its own layer or below; never above.
 LAYERS = {
     "modaluq._core": 0, "modaluq._blas": 0, "modaluq.version": 0,
-    "modaluq.checks": 1, "modaluq.jsonvalues": 1,
+    "modaluq.checks": 1, "modaluq.jsonvalues": 1, "modaluq.atomic": 1,
     # settings and the signal helpers they are applied with; the side leaves (files, simulator)
     "modaluq.settings": 2, "modaluq.preprocess": 2, "modaluq.auto_settings": 2, "modaluq.spectrum": 2,
     "modaluq.harmonics": 2, "modaluq.provenance": 2, "modaluq.simulate.*": 2, "modaluq.io.*": 2,
@@ -41,7 +41,7 @@ LAYERS = {
 
 #: Side leaves: they import nothing of the package but these (and their own subpackage).
 SIDE_LEAVES = {"modaluq.io": {"modaluq.checks"}, "modaluq.simulate": {"modaluq.checks"},
-               "modaluq.monitoring.simulator": {"modaluq.checks", "modaluq.simulate"}}
+               "modaluq.monitoring.simulator": {"modaluq.checks", "modaluq.atomic", "modaluq.simulate"}}
 
 #: The monitoring wing's modules (docs/architecture.md), each importing only those before it;
 #: its ``__init__`` (``modaluq.monitoring``) imports them all.

@@ -220,6 +220,8 @@ def monitor(records, *, out=None, settings: Settings | None = None, criteria: St
     settle = _settle_seconds() if settle_seconds is None else check_real("settle_seconds", settle_seconds, low=0)
     config = dataclasses.replace(config, settle_seconds=settle)
     out_paths = store.output_paths(out, poles)
+    if out_paths:  # a store a killed writer left half swapped is put back; dead writers' temporaries removed
+        store.recover(out_paths)
     tasks = record_tasks(records, covariates)
     with store_lock(out_paths["store"]) if out_paths else contextlib.nullcontext():  # one run at a time
         return _run(tasks, config, out_paths, tracking, executor, threads, workers, scheduler, resume, progress, t0)

@@ -28,6 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..atomic import csv_cell
 from ..checks import check_integer, check_real, check_sampling_frequency
 from ..simulate import Simulation, chain_system, default_output_dofs, modal_parameters, simulate
 
@@ -106,7 +107,7 @@ class MonitoringSimulation:
             w = csv.writer(fh)
             w.writerow(["record", "time", "temperature"])
             for rec in self.records:
-                w.writerow([f"{rec.name}.{format}", str(rec.time), f"{rec.covariates['temperature']:.6g}"])
+                w.writerow([csv_cell(f"{rec.name}.{format}"), str(rec.time), f"{rec.covariates['temperature']:.6g}"])
         return paths
 
 

@@ -11,16 +11,18 @@ complex shapes (:data:`COMPLEX_SHAPES`) are stored as their real and imaginary p
 
 from __future__ import annotations
 
-import os
+import contextlib
 from pathlib import Path
 
 import numpy as np
 
+from .. import atomic
 from ..checks import require
 from ..jsonvalues import dumps
 from ..version import __version__
 
-__all__ = ["COMPLEX_SHAPES", "dataset", "failure_table", "load_tracks", "output_paths", "pole_table", "write"]
+__all__ = ["COMPLEX_SHAPES", "dataset", "failure_table", "load_tracks", "output_paths", "pole_table", "recover",
+           "write"]
 
 #: complex variables of the dataset, stored as their real and imaginary parts (NetCDF has no complex type)
 COMPLEX_SHAPES = {"mode_shape": "mode shape of the record, largest component 1",
@@ -182,33 +184,65 @@ def failure_table(tasks: list, parts: list, done: np.ndarray):
                         columns=["record", "source", "stage", "error"])
 
 
+def recover(paths: dict) -> list:
+    """Clean up after writers of these outputs (:func:`output_paths`) that died: a store left as
+    ``<store>.old-<pid>`` between the two renames of its swap is put back; the temporaries of dead
+    writers are removed (:func:`modaluq.atomic.recover`). Returns what was done, one line each."""
+    return [line for key in ("store", "poles", "failures") for line in atomic.recover(paths[key])]
+
+
 def write(result, paths: dict) -> tuple:
     """Write a :class:`~modaluq.monitoring.Monitoring` to the files of :func:`output_paths`: the
-    store (through a temporary file, replaced at once), the pole table and the failures table.
-    Returns their names."""
+    store, the pole table and the failures table. Returns their names.
+
+    Each is written to a temporary beside it (``<name>.tmp-<pid>``) and the three are renamed
+    into place only once all are complete (a Zarr store, a directory, with two renames:
+    :func:`modaluq.atomic.commit`), so the previous outputs survive any failure. If one cannot be
+    written (full disk ...) the error names it, nothing is replaced, except the failures table,
+    which is still written if it can be (the failures are what a user reads first)."""
+    recover(paths)
     ds = result.dataset.drop_vars(list(COMPLEX_SHAPES), errors="ignore")  # stored as real and imaginary parts
     store = paths["store"]
-    tmp = store.with_name(f".{store.name}.{os.getpid()}.tmp")
     if paths["kind"] == "netcdf":
-        ds.to_netcdf(tmp)
-        os.replace(tmp, store)
+        def write_store(tmp):
+            ds.to_netcdf(tmp)
     else:
-        import shutil
-
         import zarr
 
         # Zarr format 2 (the only one of zarr < 3): its string arrays (record names, status) are
         # specified and readable by every Zarr library; zarr 3 warns that its own v3 strings are not
         fmt = {"zarr_format": 2} if int(zarr.__version__.split(".")[0]) >= 3 else {}
-        ds.to_zarr(tmp, mode="w", consolidated=True, **fmt)
-        if store.exists():
-            shutil.rmtree(store)
-        os.replace(tmp, store)
+
+        def write_store(tmp):
+            ds.to_zarr(tmp, mode="w", consolidated=True, **fmt)
     if paths["poles"].suffix.lower() == ".parquet":
-        result.poles.to_parquet(paths["poles"], index=False)
+        def write_poles(tmp):
+            result.poles.to_parquet(tmp, index=False)
     else:
-        result.poles.to_csv(paths["poles"], index=False)
-    result.failures.to_csv(paths["failures"], index=False)
+        def write_poles(tmp):
+            atomic.csv_safe(result.poles).to_csv(tmp, index=False)
+
+    def write_failures(tmp):
+        atomic.csv_safe(result.failures).to_csv(tmp, index=False)
+
+    written = []  # (temporary, output), complete and not yet in place
+    failed = None  # the output that could not be written
+    try:
+        for path, writer in ((store, write_store), (paths["poles"], write_poles),
+                             (paths["failures"], write_failures)):
+            failed = path
+            written.append((atomic.write_temporary(path, writer), path))
+        failed = None
+        while written:
+            atomic.commit(*written[0])
+            written.pop(0)
+    except BaseException as exc:
+        for tmp, _ in written:
+            atomic.discard(tmp)
+        if isinstance(exc, Exception) and failed in (store, paths["poles"]):
+            with contextlib.suppress(OSError):  # the first error is the one to report
+                atomic.write_atomically(paths["failures"], write_failures)
+        raise
     return (str(store), str(paths["poles"]), str(paths["failures"]))
 
 

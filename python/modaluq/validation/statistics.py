@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..atomic import csv_cell
 from ..checks import check_boolean
 from ..jsonvalues import dumps
 from .paper import METHOD_LABELS, METHODS
@@ -366,4 +367,4 @@ def _csv_cell(x):
         return "" if not np.isfinite(x) else repr(float(x))
     if isinstance(x, (np.integer, np.bool_)):
         return x.item()
-    return x
+    return csv_cell(x)  # text that a spreadsheet would run as a formula is escaped
