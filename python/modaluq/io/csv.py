@@ -421,7 +421,8 @@ def read_csv(path, *, fs=None, inputs=None, time_column=None, delimiter=None, de
             times = _trim(times, n)
             is_time, unit = _time_unit(names[tcol], units[tcol])
             scale = _time_scale(p, fields[tcol], unit if is_time else units[tcol])
-            fs_file = fs_from_time(times * scale, p, tolerance=float(time_tolerance),
+            times *= scale  # in place: the same numbers as times * scale, without a copy
+            fs_file = fs_from_time(times, p, tolerance=float(time_tolerance),
                                    what=f"time column {names[tcol]!r}")
             del times
         names = [names[k] for k in keep]
