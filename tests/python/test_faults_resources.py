@@ -128,19 +128,23 @@ def test_streaming_identify_is_checked(sim, monkeypatch):
 
 # ---------------------------------------------------------------- the estimate against measurements
 MEASURE = """
-    import json, resource, sys
+    import json, sys
     import numpy as np
     import modaluq
     from modaluq.checks import estimate_cost
     y = np.ascontiguousarray(modaluq.simulate(20_000, seed=1).y)
-    def rss():
+    def status(field):
         for line in open("/proc/self/status"):
-            if line.startswith("VmRSS"):
+            if line.startswith(field):
                 return int(line.split()[1]) * 1024
-    before = rss()
+    # ru_maxrss (getrusage) keeps the parent's RSS at the fork: pytest's, not this process's.
+    # VmHWM is this process's own peak; writing 5 to clear_refs resets it to the RSS now.
+    with open("/proc/self/clear_refs", "w") as f:
+        f.write("5")
+    before = status("VmRSS")
     kw = json.loads(sys.argv[1] if len(sys.argv) > 1 else '{cfg}')
     r = modaluq.identify(y, fs=50.0, **kw)
-    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+    peak = status("VmHWM")
     s = r.settings
     est = estimate_cost(y.shape[0], 3, 0, block_rows=s["block_rows"], orders=s["orders"], n_blocks=s["n_blocks"] or 2,
                         uncertainty=s["uncertainty"], threads=s["threads"])
