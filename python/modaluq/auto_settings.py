@@ -23,6 +23,9 @@ outputs, f_low the band's lower edge):
    (2 l + 3 blocks give every mode's joint covariance full rank), and at most as many as hold
    BLOCK_SPAN (p + q) columns each. A record too short for that gets the minimum and the core's
    ``block_too_short`` warning says so.
+4. **Memory.** The settings chosen pass :func:`modaluq.checks.check_cost`: if their estimated
+   memory exceeds what the machine has (never with H of MAX_ROWS rows on an ordinary machine),
+   the chosen n_blocks and then block_rows are lowered until it fits.
 """
 
 from __future__ import annotations

@@ -107,6 +107,10 @@ def identify(y, u=None, *, fs: float, settings: Settings | None = None,
         One name per output channel, used by tables, plots and exports. Default: the columns of
         ``y`` when it is a :class:`pandas.DataFrame`, else ``y0, y1, ...``.
 
+    Settings whose estimated memory (H is p l x q r; the propagation holds n_blocks + 20 copies
+    of it) exceeds the memory available are refused before the core starts, with a ValueError
+    naming the settings to lower; docs/settings.md, "Memory".
+
     Returns
     -------
     Result

@@ -300,6 +300,9 @@ def read_csv(path, *, fs=None, inputs=None, time_column=None, delimiter=None, de
     Header cells like ``acc1 [m/s^2]`` or ``acc1 (m/s^2)`` give name ``acc1`` and unit
     ``m/s^2``. Any empty, NaN or unparsable cell raises ``ValueError`` naming the file, the
     1-based line number in the file (the header counts) and the column.
+
+    The file is read in batches of ``CHUNK_BYTES`` and parsed into one preallocated array, so
+    the memory held is about the array's (docs/loaders.md).
     """
     p = check_path(path)
     check_fs_arg(fs)
