@@ -402,7 +402,7 @@ def read_csv(path, *, fs=None, inputs=None, time_column=None, delimiter=None, de
             batch = [ln[:-len(delim)] if ln.rstrip().endswith(delim) else ln for ln in
                      (d.rstrip() for d in batch)]
         block = _parse_batch(p, batch, linenos, delim, decimal, names)
-        if n + len(batch) > values.shape[0]:  # more rows than line ends counted: cannot happen
+        if n + len(batch) > values.shape[0]:  # an encoding whose line ends are other bytes (EBCDIC)
             grow = max(n + len(batch), 2 * values.shape[0])
             values = _grow(values, grow)
             times = None if times is None else _grow(times, grow)
