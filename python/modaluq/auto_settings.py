@@ -23,6 +23,9 @@ outputs, f_low the band's lower edge):
    (2 l + 3 blocks give every mode's joint covariance full rank), and at most as many as hold
    BLOCK_SPAN (p + q) columns each. A record too short for that gets the minimum and the core's
    ``block_too_short`` warning says so.
+4. **Memory.** The settings chosen pass :func:`modaluq.checks.check_cost`: if their estimated
+   memory exceeds what the machine has (never with H of MAX_ROWS rows on an ordinary machine),
+   the chosen n_blocks and then block_rows are lowered until it fits.
 
 A record shorter than :func:`minimum_samples` is refused (``ValueError`` naming the minimum):
 it cannot hold the smallest automatic identification, block_rows p = max(2, 1 + ceil(MIN_ORDER / l))
@@ -35,7 +38,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from .checks import check_integer, check_real, check_sampling_frequency
+from .checks import available_memory, check_integer, check_real, check_sampling_frequency, estimate_cost
 
 __all__ = ["ChosenSettings", "choose_settings", "LAG_PERIODS", "CENTRE_PERIODS", "MAX_ROWS", "MAX_ORDER", "MIN_ORDER",
            "XI_REF", "MIN_BLOCKS", "MAX_BLOCKS", "minimum_samples"]
@@ -95,11 +98,15 @@ def minimum_samples(n_outputs: int) -> int:
 
 def choose_settings(n_samples: int, fs: float, n_outputs: int, *, frequency_range=None,
                     n_references: int | None = None, block_rows: int | None = None,
-                    orders=None, n_blocks: int | None = None) -> ChosenSettings:
+                    orders=None, n_blocks: int | None = None, n_inputs: int = 0, uncertainty: bool = True,
+                    threads: int = 1) -> ChosenSettings:
     """Fill in ``block_rows``, ``orders`` and ``n_blocks`` by the rules of this module.
 
     Settings given are kept (and the others are chosen around them). Returns
-    :class:`ChosenSettings` whose ``reasons`` say what was chosen from what.
+    :class:`ChosenSettings` whose ``reasons`` say what was chosen from what. The settings chosen
+    fit the memory available (:func:`modaluq.checks.check_cost`; ``n_inputs``, ``uncertainty``
+    and ``threads`` enter that estimate): when they would not, the chosen ``n_blocks`` and then
+    ``block_rows`` are lowered until they do, and the reasons say so.
 
     Examples
     --------
@@ -143,6 +150,7 @@ def choose_settings(n_samples: int, fs: float, n_outputs: int, *, frequency_rang
     else:
         p = check_integer("block_rows", block_rows, minimum=2)
     limit = min((p - 1) * l, p * r)
+    orders_chosen = orders is None
     if orders is None:
         n_max = max(2, min(limit, MAX_ORDER) // 2 * 2)
         orders = tuple(range(2, n_max + 1, 2))
@@ -161,6 +169,9 @@ def choose_settings(n_samples: int, fs: float, n_outputs: int, *, frequency_rang
         reasons.append(why)
     else:
         n_b = check_integer("n_blocks", n_blocks, minimum=2)
+    p, orders, n_b = _fit_memory(reasons, n_samples, l, r, p, orders, n_b, n_inputs=n_inputs,
+                                 uncertainty=uncertainty, threads=threads, chosen=(block_rows is None,
+                                                                                   orders_chosen, n_blocks is None))
     return ChosenSettings(block_rows=p, orders=tuple(orders) if not isinstance(orders, int) else (orders,),
                           n_blocks=n_b, reasons=tuple(reasons))
 
@@ -191,3 +202,37 @@ def lag_warning(block_rows: int, fs: float, frequency_range) -> str | None:
     return (f"block_rows = {block_rows} gives lags of {block_rows / fs:.3g} s, less than one period of the band's "
             f"lowest frequency {f_low:g} Hz ({1 / f_low:.3g} s): its modes are poorly identified; use block_rows "
             f">= {math.ceil(fs / f_low)} (the automatic choice is {need})")
+
+
+def _fit_memory(reasons: list, n_samples: int, l: int, r: int, p: int, orders, n_b: int, *, n_inputs: int,
+                uncertainty: bool, threads: int, chosen: tuple):
+    """``(p, orders, n_b)`` lowered, where they were chosen, until the estimate of
+    :func:`modaluq.checks.estimate_cost` fits the memory available: first the blocks (to the
+    fewest that still give every mode's covariance full rank, then 2), then the horizon (halved,
+    the automatic orders following it). Unchanged when they fit (every ordinary case: H is at
+    most MAX_ROWS rows)."""
+    p_chosen, orders_chosen, blocks_chosen = chosen
+    have = available_memory()[0]
+
+    def need(p_, orders_, n_b_):
+        return estimate_cost(n_samples, l, n_inputs, block_rows=p_, n_references=r, orders=orders_, n_blocks=n_b_,
+                             uncertainty=uncertainty, threads=threads).bytes
+
+    if need(p, orders, n_b) <= have:
+        return p, orders, n_b
+    p0, n_b0 = p, n_b
+    if blocks_chosen and uncertainty:
+        for fewer in (max(MIN_BLOCKS, 2 * l + 3), 2):
+            if fewer < n_b:
+                n_b = fewer
+                if need(p, orders, n_b) <= have:
+                    break
+    while p_chosen and p > 2 and need(p, orders, n_b) > have:
+        p = max(2, p // 2)
+        if orders_chosen:
+            n_max = max(2, min(min((p - 1) * l, p * r), MAX_ORDER) // 2 * 2)
+            orders = tuple(range(2, n_max + 1, 2))
+    if (p, n_b) != (p0, n_b0):
+        reasons.append(f"lowered to block_rows = {p}, n_blocks = {n_b} (from {p0}, {n_b0}) to fit the "
+                       f"{have / 1e9:.3g} GB of memory available (docs/settings.md, \"Memory\")")
+    return p, orders, n_b

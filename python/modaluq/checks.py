@@ -6,10 +6,12 @@ count is), ``ValueError`` for a value out of range. Imports nothing from the pac
 
 from __future__ import annotations
 
+import contextlib
 import importlib
 import math
 import numbers
-from typing import Iterable
+import os
+from typing import Iterable, NamedTuple
 
 import numpy as np
 
@@ -175,3 +177,179 @@ def require(module: str, purpose: str = "this"):
         extra = EXTRAS.get(module, "all")
         raise ImportError(f"{purpose} needs {module}, which is not installed: run pip install \".[{extra}]\" "
                           f"in the modaluq source directory (or pip install {module})") from exc
+
+
+# --------------------------------------------------------------------------- memory of a run
+#: Environment variable that replaces the memory an identification may use (bytes, or with a
+#: K, M, G or T suffix, powers of 1024): for a machine shared with other jobs, or to let a run
+#: that the estimate refuses try anyway (docs/settings.md, "Memory").
+MEMORY_LIMIT_ENV = "MODALUQ_MEMORY_LIMIT"
+#: Noise-floor draws of the core (detail/noise_floor.hpp, kNoiseFloorDraws): each is one dH.
+_NOISE_FLOOR_DRAWS = 20
+
+
+class Cost(NamedTuple):
+    """What :func:`estimate_cost` expects an identification to take."""
+
+    bytes: int          #: peak memory the core allocates (the samples themselves not included)
+    seconds: float      #: rough time on one core (within a factor of a few)
+    parts: dict         #: bytes of the peak per setting that drives them (block_rows, n_blocks, orders)
+    a: int              #: rows of H, p l
+    b: int              #: columns of H, q r
+
+
+def estimate_cost(n_samples: int, n_outputs: int, n_inputs: int, *, block_rows: int, past_block_rows=None,
+                  n_references=None, orders, n_blocks, uncertainty: bool = True, threads: int = 1) -> Cost:
+    """Conservative estimate of the peak memory (and a rough time) of one identification.
+
+    From the sizes the core allocates (cpp/include/modaluq, docs/settings.md "Memory"), with
+    a = p l, b = q r, c = p m, E = ab + ac + c² + bc (the entries of R1..R4), s = min(a, b), n
+    the largest order, n_b the blocks (0 without uncertainty), in float64:
+    the covariance pass holds R1..R4 and the per-block covariances, E (1 + n_b); the SVD of H
+    about 2 ab + 3 s² + 2 (a + b) s beside them; the propagation T_R (E n_b) and T_H (ab n_b)
+    at once, then T_H with 20 noise-floor draws of dH (20 ab) and the Q matrices of every block
+    at n (2 n_b (2 n² + l n)); each order, per thread, 6 n_b n² + 4 l n_b n + 4 a n; the result
+    ~ 2 sum_n n ((2 + 2l)² + 6l + 12). The peak is the largest of these phases, plus the lag
+    sums (n_b + threads)(p + q + 1) d (d + 1), d = l + m. ``n_samples`` 0: from covariances
+    (streaming), no covariance pass. Measured peaks are 0.5 to 1 times it (tests/python/
+    test_faults_resources.py).
+    """
+    l, m = int(n_outputs), int(n_inputs)
+    p = int(block_rows)
+    q = int(past_block_rows or p)
+    r = int(n_references or l)
+    order_list = sorted({int(o) for o in ([orders] if isinstance(orders, numbers.Integral) else orders)})
+    a, b, c = p * l, q * r, p * m
+    s = min(a, b)
+    n = min(order_list[-1], max(a - l, 1), b)
+    nb = int(n_blocks) if uncertainty else 0
+    t = max(1, int(threads))
+    E = a * b + a * c + c * c + b * c
+    d = l + m
+    lag_sums = (nb + t) * (p + q + 1) * d * (d + 1) if n_samples else 0
+    svd = 2 * a * b + 3 * s * s + 2 * (a + b) * s
+    realization = 2 * (a + b) * s + 2 * a * n
+    block_q = 2 * nb * (2 * n * n + l * n)
+    per_order = t * (6 * nb * n * n + 4 * l * nb * n + 4 * a * n) if nb else t * 4 * a * n
+    shape = (2 + 2 * l) ** 2 + 6 * l + 12 if nb else 2 * l + 6
+    result = 2 * sum(min(o, n) for o in order_list) * shape
+    phases = {
+        "covariances": lag_sums + E * (1 + nb) + E,
+        "svd": E * (1 + nb) + E + a * b + svd,
+        "propagation": E * (1 + nb) + a * b * nb + 2 * a * b + realization if nb else 0,
+        "noise floor": E + a * b * nb + a * b + realization + (a + b) * s + _NOISE_FLOOR_DRAWS * a * b + block_q,
+        "orders": E + a * b + realization + (a + b) * s + block_q + per_order,
+    }
+    if not nb:
+        phases["noise floor"] = 0
+    # Eigen's SVD and the allocator's slack: 1.3 x, from measured peaks (docs/settings.md)
+    peak = 1.3 * 8 * (max(phases.values()) + result)
+    # which setting drives the peak: H's size (block_rows), the blocks, the orders
+    h_terms = 8 * (E + a * b + svd + realization + (_NOISE_FLOOR_DRAWS * a * b if nb else 0))
+    blocks = 8 * (E * nb + a * b * nb) if nb else 0
+    order_terms = 8 * (block_q + per_order + result)
+    parts = {"block_rows": h_terms, "n_blocks": blocks, "orders": order_terms}
+    flops = (2.0 * n_samples * (p + q) * d * d + 10.0 * a * b * s
+             + (nb * (2.0 * E + 4.0 * a * b * n) + _NOISE_FLOOR_DRAWS * (2.0 * a * b * nb + 0.5 * a * b * s)
+                if nb else 0.0)
+             + sum(30.0 * min(o, n) ** 3 + 8.0 * nb * min(o, n) ** 2 * (n + l) for o in order_list))
+    return Cost(bytes=int(peak), seconds=flops / 2e9, parts=parts, a=a, b=b)
+
+
+def _parse_bytes(text: str) -> int:
+    units = {"": 1, "K": 1024, "M": 1024**2, "G": 1024**3, "T": 1024**4}
+    t = text.strip().upper().removesuffix("B").removesuffix("I")
+    try:
+        value = float(t[:-1] if t and t[-1] in units else t) * units[t[-1] if t and t[-1] in units else ""]
+    except ValueError:
+        value = math.nan
+    if not (math.isfinite(value) and value > 0):
+        raise ValueError(f"{MEMORY_LIMIT_ENV} must be a size in bytes (e.g. 8G, 512M, 1000000000); got {text!r}")
+    return int(value)
+
+
+def available_memory() -> tuple[int, str]:
+    """``(bytes, where from)``: the memory an identification may use: ``MODALUQ_MEMORY_LIMIT``
+    if set, else the smallest of the physical memory (``os.sysconf``), the cgroup limit of
+    a container and this process's address-space limit (``ulimit -v``)."""
+    override = os.environ.get(MEMORY_LIMIT_ENV)
+    if override:
+        return _parse_bytes(override), f"{MEMORY_LIMIT_ENV}"
+    found = []
+    try:
+        found.append((os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES"), "physical memory"))
+    except (ValueError, OSError, AttributeError):  # not POSIX: no limit known
+        pass
+    for cgroup in ("/sys/fs/cgroup/memory.max", "/sys/fs/cgroup/memory/memory.limit_in_bytes"):
+        try:
+            with open(cgroup) as f:
+                found.append((int(f.read().strip()), "the container's memory limit"))
+        except (OSError, ValueError):  # absent, or "max"
+            pass
+    try:
+        import resource
+        for limit, name in ((resource.RLIMIT_AS, "address-space limit (ulimit -v)"),
+                            (resource.RLIMIT_DATA, "data-segment limit (ulimit -d)")):
+            soft = resource.getrlimit(limit)[0]
+            if soft != resource.RLIM_INFINITY and soft > 0:
+                found.append((soft, f"this process's {name}"))
+    except ImportError:
+        pass
+    return min(found) if found else (2**63 - 1, "no limit known")
+
+
+def _gb(x: float) -> str:
+    return f"{x / 1e9:.3g} GB"
+
+
+def check_cost(n_samples: int, n_outputs: int, n_inputs: int, settings, *, n_references=None) -> Cost:
+    """Refuse ``settings`` whose estimated memory (:func:`estimate_cost`) exceeds
+    :func:`available_memory`, naming the settings to lower; returns the estimate otherwise.
+    ``settings`` is a complete :class:`modaluq.Settings` (block_rows, orders, n_blocks set)."""
+    s = settings
+    cost = estimate_cost(n_samples, n_outputs, n_inputs, block_rows=s.block_rows, past_block_rows=s.past_block_rows,
+                         n_references=n_references if n_references is not None else
+                         (len(s.references) if s.references else None),
+                         orders=s.orders, n_blocks=s.n_blocks, uncertainty=s.uncertainty, threads=s.threads)
+    have, source = available_memory()
+    if cost.bytes > have:
+        raise ValueError(f"these settings would need about {_gb(cost.bytes)} of memory ({describe_cost(s, cost)}) "
+                         f"but {_gb(have)} is available ({source}); lower {advice(s, cost)} "
+                         f"(docs/settings.md, \"Memory\"; set {MEMORY_LIMIT_ENV} to change the limit)")
+    return cost
+
+
+def describe_cost(s, cost: Cost) -> str:
+    """The sizes behind an estimate, in words."""
+    n_max = max([s.orders] if isinstance(s.orders, numbers.Integral) else s.orders)
+    blocks = f"{s.n_blocks} blocks" if s.uncertainty else "no uncertainty"
+    minutes = cost.seconds / 60.0
+    time = f"{cost.seconds:.0f} s" if minutes < 2 else f"{minutes:.0f} min"
+    return (f"H is {cost.a} x {cost.b} for block_rows={s.block_rows}, {blocks}, orders up to {n_max}; "
+            f"roughly {time} on one core")
+
+
+def advice(s, cost: Cost) -> str:
+    """The settings that drive the estimate, largest share first, with how to lower them."""
+    words = {"block_rows": "block_rows (the memory grows with the square of the size of H, p l x q r)",
+             "n_blocks": "n_blocks, or set uncertainty=False (the propagation holds a copy of H per block)",
+             "orders": "the largest of orders"}
+    shares = sorted(((v, k) for k, v in cost.parts.items() if v > 0), reverse=True)
+    named = [k for v, k in shares if v >= 0.2 * shares[0][0]]
+    return " or ".join(words[k] for k in named)
+
+
+@contextlib.contextmanager
+def naming_settings_on_memory_error(settings):
+    """Re-raise a ``MemoryError`` of the core (a ``std::bad_alloc``, which names nothing) with
+    the settings that made it and what to lower."""
+    try:
+        yield
+    except MemoryError as exc:
+        s = settings
+        raise MemoryError(f"out of memory in the identification with block_rows={s.block_rows}, "
+                          f"past_block_rows={s.past_block_rows or s.block_rows}, n_blocks={s.n_blocks}, "
+                          f"uncertainty={s.uncertainty}, threads={s.threads}, orders up to "
+                          f"{max([s.orders] if isinstance(s.orders, numbers.Integral) else s.orders)}: "
+                          "lower block_rows, n_blocks or the orders, set uncertainty=False or threads=1 "
+                          f"(docs/settings.md, \"Memory\"){': ' + str(exc) if str(exc) else ''}") from exc

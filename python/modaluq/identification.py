@@ -15,7 +15,14 @@ import numpy as np
 from . import _core
 from ._blas import single_threaded as single_threaded_blas
 from .auto_settings import capped_lag_warning, choose_settings, lag_warning
-from .checks import as_samples, check_sampling_frequency, constant_channel_warning, constant_channels
+from .checks import (
+    as_samples,
+    check_cost,
+    check_sampling_frequency,
+    constant_channel_warning,
+    constant_channels,
+    naming_settings_on_memory_error,
+)
 from .preprocess import preprocess
 from .results import Result, result_from_core, warn_all
 from .settings import Settings
@@ -107,6 +114,10 @@ def identify(y, u=None, *, fs: float, settings: Settings | None = None,
         One name per output channel, used by tables, plots and exports. Default: the columns of
         ``y`` when it is a :class:`pandas.DataFrame`, else ``y0, y1, ...``.
 
+    Settings whose estimated memory (H is p l x q r; the propagation holds n_blocks + 20 copies
+    of it) exceeds the memory available are refused before the core starts, with a ValueError
+    naming the settings to lower; docs/settings.md, "Memory".
+
     Returns
     -------
     Result
@@ -156,11 +167,14 @@ def identify_quietly(y, u=None, *, fs: float, settings: Settings | None = None,
     if s.block_rows is None or s.orders is None or s.n_blocks is None:
         n_refs = None if s.references is None else len(s.references)
         chosen = choose_settings(y.shape[0], fs, y.shape[1], frequency_range=band, n_references=n_refs,
-                                 block_rows=s.block_rows, orders=s.orders, n_blocks=s.n_blocks)
+                                 block_rows=s.block_rows, orders=s.orders, n_blocks=s.n_blocks,
+                                 n_inputs=0 if u is None else u.shape[1], uncertainty=s.uncertainty, threads=s.threads)
         s = s.replace(block_rows=chosen.block_rows, orders=chosen.orders, n_blocks=chosen.n_blocks)
     o = s.to_core(fs)
+    # refused here, in a moment, rather than after minutes or with a bare std::bad_alloc
+    check_cost(y.shape[0], y.shape[1], 0 if u is None else u.shape[1], s)
     u_t = np.empty((0, y.shape[0])) if u is None else u.T
-    with single_threaded_blas():
+    with single_threaded_blas(), naming_settings_on_memory_error(s):
         ident = _core.identify(y.T, u_t, o)
     record = s.record(fs, y.shape[1])
     record["frequency_range"] = None if band is None else list(band)

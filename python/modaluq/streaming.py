@@ -12,7 +12,14 @@ import numpy as np
 
 from . import _core
 from ._blas import single_threaded as single_threaded_blas
-from .checks import as_samples, check_boolean, check_integer, check_integers
+from .checks import (
+    as_samples,
+    check_boolean,
+    check_cost,
+    check_integer,
+    check_integers,
+    naming_settings_on_memory_error,
+)
 from .identification import make_settings
 from .results import Result, result_from_core, warn_all
 from .settings import PREPROCESSING_FIELDS, Settings
@@ -118,12 +125,17 @@ class CovarianceAccumulator:
             raise TypeError(f"CovarianceAccumulator.identify: {given[0]} is fixed when the accumulator is made "
                             "(or, for preprocessing, before the samples are pushed)")
         layout = self._acc.layout
+        check_cost(0, layout.n_outputs, layout.n_inputs,  # before finish(), which allocates the blocks
+                   s.replace(block_rows=layout.block_rows, past_block_rows=layout.past_block_rows or None,
+                             n_blocks=max(self._acc.n_samples // self._acc.block_length, 2)),
+                   n_references=len(layout.references) or None)
         cov = self._acc.finish(s.uncertainty)
         s = s.replace(block_rows=layout.block_rows, past_block_rows=layout.past_block_rows or None,
                       references=tuple(layout.references) or None, demean=self._acc.demean,
                       n_blocks=max(int(cov.n_blocks), 2))
         o = s.to_core(fs)
-        with single_threaded_blas():  # the covariance pass uses no BLAS; the propagation does
+        # the covariance pass uses no BLAS; the propagation does
+        with single_threaded_blas(), naming_settings_on_memory_error(s):
             ident = _core.identify_covariances(cov, o)
         result = result_from_core(ident, s.record(o.fs, layout.n_outputs), layout.n_outputs, layout.n_inputs)
         warn_all(result)

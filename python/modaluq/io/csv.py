@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import codecs
 import csv as _csv
 import numbers
 import re
@@ -141,6 +142,132 @@ def _locate_problem(path, lines, linenos, delim, decimal, colnames):
     return None
 
 
+#: Bytes read (and decoded) at a time: the parse holds one such batch of lines besides the array.
+CHUNK_BYTES = 1 << 20
+_LINE_END = re.compile(r"\r\n|\r|\n")  # a bare CR ends a line too (classic Mac)
+
+
+def _scan(path, encoding) -> tuple[int, str]:
+    """First, cheap pass over the bytes: ``(lines, encoding)``, an upper bound on the data rows
+    (the lines of the file) and the encoding to decode with. Refuses binary content and, for
+    an explicit ``encoding``, bytes it cannot decode, before anything is parsed."""
+    if encoding is not None:
+        try:
+            decoder = codecs.getincrementaldecoder(encoding)()
+        except LookupError as exc:
+            raise fail(path, f"cannot decode as {encoding}: {exc}") from None
+    else:
+        decoder = codecs.getincrementaldecoder("utf-8-sig")()
+    line_ends, offset, after_cr = 0, 0, False
+    with open(path, "rb") as f:
+        while True:
+            chunk = f.read(CHUNK_BYTES)
+            if offset < 65536 and b"\x00" in chunk[:65536 - offset]:
+                raise fail(path, "binary content (NUL bytes): not a delimited text file")
+            offset += len(chunk)
+            if decoder is not None:
+                try:
+                    decoder.decode(chunk, final=not chunk)
+                except UnicodeDecodeError:
+                    if encoding is not None:  # the whole file's error, with its position
+                        try:
+                            path.read_bytes().decode(encoding)
+                        except UnicodeDecodeError as exc:
+                            raise fail(path, f"cannot decode as {encoding}: {exc}") from None
+                        raise
+                    decoder = None  # not UTF-8: Latin-1, which decodes any byte
+            if not chunk:
+                break
+            line_ends += (chunk.count(b"\n") + chunk.count(b"\r") - chunk.count(b"\r\n")
+                          - (after_cr and chunk[:1] == b"\n"))
+            after_cr = chunk[-1:] == b"\r"
+    return line_ends + 1, encoding or ("utf-8-sig" if decoder is not None else "latin-1")
+
+
+def _content_lines(path, encoding: str, comment):
+    """The non-blank, non-comment lines of the file and their 1-based line numbers, a batch of
+    about CHUNK_BYTES at a time. The lines are those ``re.split(r"\r\n|\r|\n", text)`` gives
+    for the whole text: a batch never ends between a CR and the LF that may follow it."""
+    decoder = codecs.getincrementaldecoder(encoding)()
+    carry, lineno = "", 0
+    with open(path, "rb") as f:
+        while True:
+            chunk = f.read(CHUNK_BYTES)
+            text = carry + decoder.decode(chunk, final=not chunk)
+            if chunk:
+                end = max(text.rfind("\n"), text.rfind("\r", 0, len(text) - 1)) + 1
+                carry, lines = text[end:], _LINE_END.split(text[:end])[:-1] if end else []
+            else:
+                carry, lines = "", _LINE_END.split(text)
+            del text
+            batch, numbers_ = [], []
+            for line in lines:
+                lineno += 1
+                s = line.strip()
+                if s and not (comment is not None and s.startswith(comment)):
+                    batch.append(line)
+                    numbers_.append(lineno)
+            yield batch, numbers_
+            if not chunk:
+                return
+
+
+def _parse_batch(path, lines, linenos, delim, decimal, colnames):
+    """``lines`` parsed into a ``(len(lines), len(colnames))`` array; a ValueError naming the
+    line and column of the first empty, NaN, infinite or unparsable cell."""
+    ncol = len(colnames)
+    work = [d.replace(",", ".") for d in lines] if decimal == "," else lines
+    try:
+        values = np.loadtxt(work, delimiter=delim, dtype=np.float64, ndmin=2, quotechar='"',
+                            comments=None)
+    except Exception:  # noqa: BLE001 - fall back to the slow scan that names line/column
+        values = None
+    if values is None or values.shape != (len(lines), ncol):
+        _locate_problem(path, lines, linenos, delim, decimal, colnames)
+        raise fail(path, "could not parse the numeric data (inconsistent rows?)")
+    bad = ~np.isfinite(values)
+    if bad.any():
+        r, c = np.argwhere(bad)[0]
+        fields = _split(lines[r], delim)
+        raise _cell_error(path, linenos[r], colnames[c], fields[c] if len(fields) == ncol else "nan")
+    return values
+
+
+def _grow(a, rows: int):
+    out = np.empty((rows,) + a.shape[1:], dtype=a.dtype)
+    out[:a.shape[0]] = a
+    return out
+
+
+def _trim(a, rows: int):
+    """The first ``rows`` rows of ``a``, shrunk in place (no copy: its pages are returned)."""
+    if rows != a.shape[0]:
+        a.resize((rows,) + a.shape[1:], refcheck=False)  # no view of a exists
+    return a
+
+
+def _time_column(path, time_column, names, units, fields):
+    """Index of the time column (None if there is none) from the header alone."""
+    ncol = len(names)
+    if time_column is None:
+        for k, (nm, un) in enumerate(zip(names, units)):
+            if _time_unit(nm, un)[0]:
+                return k
+        return None
+    if time_column is False:
+        return None
+    if isinstance(time_column, str):
+        matches = [k for k, nm in enumerate(names) if nm == time_column or fields[k] == time_column]
+        if not matches:
+            raise fail(path, f"time_column {time_column!r} not found; columns are: "
+                             f"{', '.join(map(repr, names))}")
+        return matches[0]
+    k = int(time_column)
+    if not -ncol <= k < ncol:
+        raise ValueError(f"{path}: time_column index {k} out of range for {ncol} columns")
+    return k % ncol
+
+
 def read_csv(path, *, fs=None, inputs=None, time_column=None, delimiter=None, decimal=".",
              comment="#", time_tolerance=0.01, encoding=None) -> Recording:
     """Read a delimited text file whose first (non-comment) row holds the channel names.
@@ -173,6 +300,9 @@ def read_csv(path, *, fs=None, inputs=None, time_column=None, delimiter=None, de
     Header cells like ``acc1 [m/s^2]`` or ``acc1 (m/s^2)`` give name ``acc1`` and unit
     ``m/s^2``. Any empty, NaN or unparsable cell raises ``ValueError`` naming the file, the
     1-based line number in the file (the header counts) and the column.
+
+    The file is read in batches of ``CHUNK_BYTES`` and parsed into one preallocated array, so
+    the memory held is about the array's (docs/loaders.md).
     """
     p = check_path(path)
     check_fs_arg(fs)
@@ -194,40 +324,27 @@ def read_csv(path, *, fs=None, inputs=None, time_column=None, delimiter=None, de
     if encoding is not None and not isinstance(encoding, str):
         raise TypeError(f"encoding must be a str or None, got {type(encoding).__name__}")
 
-    raw = p.read_bytes()
-    if b"\x00" in raw[:65536]:
-        raise fail(p, "binary content (NUL bytes): not a delimited text file")
-    if encoding is not None:
-        try:
-            text = raw.decode(encoding)
-        except (UnicodeDecodeError, LookupError) as exc:
-            raise fail(p, f"cannot decode as {encoding}: {exc}") from None
-    else:
-        try:
-            text = raw.decode("utf-8-sig")
-        except UnicodeDecodeError:
-            text = raw.decode("latin-1")
-
-    all_lines = re.split(r"\r\n|\r|\n", text)  # a bare CR ends a line too (classic Mac)
+    nrows_max, text_encoding = _scan(p, encoding)
+    content = _content_lines(p, text_encoding, comment)  # read on below, batch by batch
     hdr_idx = None
-    data, linenos = [], []
-    for i, line in enumerate(all_lines):
-        s = line.strip()
-        if not s or (comment is not None and s.startswith(comment)):
-            continue
-        if hdr_idx is None:
-            hdr_idx, header = i, line
-        else:
-            data.append(line)
-            linenos.append(i + 1)
+    first: list[str] = []  # the first data lines: the delimiter is sniffed from them
+    first_nos: list[int] = []
+    for batch, linenos in content:
+        if hdr_idx is None and batch:
+            hdr_idx, header = linenos[0] - 1, batch[0]
+            batch, linenos = batch[1:], linenos[1:]
+        first += batch
+        first_nos += linenos
+        if first:
+            break
     if hdr_idx is None:
         raise fail(p, "no header row (the file holds only blank or comment lines)")
-    if not data:
+    if not first:
         raise fail(p, f"no data rows after the header (line {hdr_idx + 1})")
 
     try:
         if delimiter is None:
-            delim = _sniff(header, data[:20], decimal)
+            delim = _sniff(header, first[:20], decimal)
         elif delimiter.isspace() and delimiter != "\t":
             delim = None  # any run of spaces
         else:
@@ -236,10 +353,9 @@ def read_csv(path, *, fs=None, inputs=None, time_column=None, delimiter=None, de
     except _csv.Error as exc:  # e.g. a header cell over the csv module's 128 KiB limit
         raise fail(p, f"line {hdr_idx + 1}: cannot split the header row: {exc}") from None
     # tolerate a trailing delimiter on every line ("a,b,c," / "1,2,3,")
-    if len(fields) > 1 and fields[-1] == "" and delim is not None:
+    trailing = len(fields) > 1 and fields[-1] == "" and delim is not None
+    if trailing:
         fields = fields[:-1]
-        data = [ln[:-len(delim)] if ln.rstrip().endswith(delim) else ln for ln in
-                (d.rstrip() for d in data)]
     names, units = zip(*(_name_unit(f) for f in fields))
     names, units = list(names), list(units)
     for k, nm in enumerate(names):
@@ -259,57 +375,59 @@ def read_csv(path, *, fs=None, inputs=None, time_column=None, delimiter=None, de
                       "a header row of channel names is required")
 
     ncol = len(names)
-    # ------------------------------------------------------------ fast numeric parse
-    work = data
-    if decimal == ",":
-        work = [d.replace(",", ".") for d in data]
-    values = None
+    # The time column is found from the header alone, so that the data are parsed straight into
+    # the final channel array; an error about it is raised after the parse, as a bad cell
+    # found by the parse is reported first.
+    tcol, time_error = None, None
     try:
-        values = np.loadtxt(work, delimiter=delim, dtype=np.float64, ndmin=2, quotechar='"',
-                            comments=None)
-    except Exception:  # noqa: BLE001 - fall back to the slow scan that names line/column
-        values = None
-    if values is None or values.shape != (len(data), ncol):
-        _locate_problem(p, data, linenos, delim, decimal, names)
-        raise fail(p, "could not parse the numeric data (inconsistent rows?)")
-    bad = ~np.isfinite(values)
-    if bad.any():
-        r, c = np.argwhere(bad)[0]
-        cell = _split(data[r], delim)[c] if len(_split(data[r], delim)) == ncol else "nan"
-        raise _cell_error(p, linenos[r], names[c], cell)
-
-    # ------------------------------------------------------------ time column
-    tcol = None
-    if time_column is None:
-        for k, (nm, un) in enumerate(zip(names, units)):
-            if _time_unit(nm, un)[0]:
-                tcol = k
-                break
-    elif time_column is not False:
-        if isinstance(time_column, str):
-            matches = [k for k, nm in enumerate(names) if nm == time_column or fields[k] ==
-                       time_column]
-            if not matches:
-                raise fail(p, f"time_column {time_column!r} not found; columns are: "
-                              f"{', '.join(map(repr, names))}")
-            tcol = matches[0]
-        else:
-            k = int(time_column)
-            if not -ncol <= k < ncol:
-                raise ValueError(f"{p}: time_column index {k} out of range for {ncol} columns")
-            tcol = k % ncol
+        tcol = _time_column(p, time_column, names, units, fields)
+    except ValueError as exc:
+        time_error = exc
     if tcol is not None and ncol == 1:
-        raise fail(p, "the only column is the time column; no channels to load")
+        time_error = fail(p, "the only column is the time column; no channels to load")
+        tcol = None
+    keep = [k for k in range(ncol) if k != tcol]
+    # ------------------------------------------------------------ chunked numeric parse
+    # Into one preallocated array (rows counted by _scan) a batch of lines at a time: the
+    # peak is the array plus one batch, not the text, its lines and a parsed copy (docs/loaders.md).
+    values = np.empty((nrows_max, len(keep)), dtype=np.float64)
+    times = np.empty(nrows_max, dtype=np.float64) if tcol is not None and fs is None else None
+    n = 0
 
+    def parse(batch, linenos):
+        nonlocal values, times, n
+        if not batch:
+            return
+        if trailing:
+            batch = [ln[:-len(delim)] if ln.rstrip().endswith(delim) else ln for ln in
+                     (d.rstrip() for d in batch)]
+        block = _parse_batch(p, batch, linenos, delim, decimal, names)
+        if n + len(batch) > values.shape[0]:  # an encoding whose line ends are other bytes (EBCDIC)
+            grow = max(n + len(batch), 2 * values.shape[0])
+            values = _grow(values, grow)
+            times = None if times is None else _grow(times, grow)
+        values[n:n + len(batch)] = block if tcol is None else block[:, keep]
+        if times is not None:
+            times[n:n + len(batch)] = block[:, tcol]
+        n += len(batch)
+
+    parse(first, first_nos)
+    del first, first_nos
+    for batch, linenos in content:
+        parse(batch, linenos)
+    if time_error is not None:
+        raise time_error
+    values = _trim(values, n)
     fs_file = None
     if tcol is not None:
         if fs is None:
+            times = _trim(times, n)
             is_time, unit = _time_unit(names[tcol], units[tcol])
             scale = _time_scale(p, fields[tcol], unit if is_time else units[tcol])
-            fs_file = fs_from_time(values[:, tcol] * scale, p, tolerance=float(time_tolerance),
+            times *= scale  # in place: the same numbers as times * scale, without a copy
+            fs_file = fs_from_time(times, p, tolerance=float(time_tolerance),
                                    what=f"time column {names[tcol]!r}")
-        keep = [k for k in range(ncol) if k != tcol]
-        values = values[:, keep]
+            del times
         names = [names[k] for k in keep]
         units = [units[k] for k in keep]
     fs_v = pick_fs(fs, fs_file, p, "no time column found (looked for "
