@@ -23,9 +23,12 @@ reads as one (``-0.5``), are left as they are.
 
 from __future__ import annotations
 
+import errno
+import gc
 import os
 import re
 import shutil
+import traceback
 from pathlib import Path
 
 __all__ = ["FORMULA_STARTS", "commit", "csv_cell", "csv_safe", "discard", "recover", "temporary",
@@ -91,11 +94,26 @@ def _fsync_tree(path: Path) -> None:
             os.close(fd)
 
 
-def _failure(path: Path, exc: BaseException) -> OSError:
-    """An :class:`OSError` (of ``exc``'s class when it is one) naming ``path``; ``exc`` becomes its cause."""
+#: Free bytes below which a writer's failure that is no OSError (netCDF says "NetCDF: HDF error")
+#: is reported as the full disk it is.
+FULL_DISK_BYTES = 1 << 16
+
+
+def _disk_full(folder: Path) -> bool:
+    try:
+        return shutil.disk_usage(folder).free < FULL_DISK_BYTES
+    except OSError:
+        return False
+
+
+def _failure(path: Path, exc: BaseException, *, disk_full: bool = False) -> OSError:
+    """An :class:`OSError` (of ``exc``'s class when it is one) naming ``path``; ``exc`` becomes its cause.
+    ``disk_full``: the writer's own error hid a full disk (ENOSPC)."""
     what = exc.strerror if isinstance(exc, OSError) and exc.strerror else f"{type(exc).__name__}: {exc}"
+    if disk_full:
+        what = f"No space left on device: {what}"
     message = f"{path}: cannot write it ({what}); the previous {path.name}, if any, is left as it was"
-    code = getattr(exc, "errno", None)
+    code = errno.ENOSPC if disk_full else getattr(exc, "errno", None)
     cls = type(exc) if isinstance(exc, OSError) else OSError
     try:
         return cls(code, message) if code is not None else cls(message)
@@ -115,11 +133,46 @@ def write_temporary(path, writer) -> Path:
         writer(tmp)
         _fsync_tree(tmp)
     except BaseException as exc:
+        full = not isinstance(exc, OSError) and _disk_full(tmp.parent)  # before the temporary gives space back
+        _release(exc)
         _remove(tmp)
+        _free_held(tmp)
         if not isinstance(exc, Exception):  # Ctrl-C: not a write error
             raise
-        raise _failure(path, exc) from exc
+        raise _failure(path, exc, disk_full=full) from exc
     return tmp
+
+
+def _release(exc: BaseException) -> None:
+    """Let go of what the failed writer still holds open. Its frames, kept alive by the exception's
+    traceback, reference its file objects (a netCDF4 dataset whose close failed on a full disk keeps
+    the temporary's space even after it is removed, so the next output fails for want of space):
+    clear those frames and collect, which closes them."""
+    seen = set()
+    while exc is not None and id(exc) not in seen:
+        seen.add(id(exc))
+        traceback.clear_frames(exc.__traceback__)
+        exc = exc.__cause__ or exc.__context__
+    gc.collect()
+
+
+def _free_held(tmp: Path) -> None:
+    """Give back the space of a removed temporary that a library still holds open. netCDF's C
+    library keeps its file open when closing fails on a full disk, and no Python object is left to
+    close it: the space would stay in use until the process ends (a notebook, a service), and the
+    outputs written after the failure would fail too. Linux names such a descriptor in /proc;
+    truncating the removed file through it frees the space (nothing can read it any more)."""
+    fds = Path("/proc/self/fd")
+    if not fds.is_dir():
+        return
+    target = os.path.abspath(tmp)
+    for fd in fds.iterdir():
+        try:
+            link = os.readlink(fd)
+            if link in (target, f"{target} (deleted)") and not os.path.exists(target):
+                os.ftruncate(int(fd.name), 0)
+        except (OSError, ValueError):
+            continue
 
 
 def commit(tmp, path) -> Path:

@@ -12,6 +12,7 @@ complex shapes (:data:`COMPLEX_SHAPES`) are stored as their real and imaginary p
 from __future__ import annotations
 
 import contextlib
+import os
 from pathlib import Path
 
 import numpy as np
@@ -205,7 +206,11 @@ def write(result, paths: dict) -> tuple:
     store = paths["store"]
     if paths["kind"] == "netcdf":
         def write_store(tmp):
-            ds.to_netcdf(tmp)
+            try:
+                ds.to_netcdf(tmp)
+            except BaseException:
+                _close_cached(tmp)  # xarray may keep the failed file open in its cache
+                raise
     else:
         import zarr
 
@@ -225,11 +230,13 @@ def write(result, paths: dict) -> tuple:
     def write_failures(tmp):
         atomic.csv_safe(result.failures).to_csv(tmp, index=False)
 
+    # The failures table first: small, and wanted even when the store cannot be written (a full
+    # disk); then the pole table, then the store. Nothing is put in place before all three are complete.
     written = []  # (temporary, output), complete and not yet in place
     failed = None  # the output that could not be written
     try:
-        for path, writer in ((store, write_store), (paths["poles"], write_poles),
-                             (paths["failures"], write_failures)):
+        for path, writer in ((paths["failures"], write_failures), (paths["poles"], write_poles),
+                             (store, write_store)):
             failed = path
             written.append((atomic.write_temporary(path, writer), path))
         failed = None
@@ -237,11 +244,16 @@ def write(result, paths: dict) -> tuple:
             atomic.commit(*written[0])
             written.pop(0)
     except BaseException as exc:
-        for tmp, _ in written:
-            atomic.discard(tmp)
+        failures_done = [(tmp, path) for tmp, path in written if path == paths["failures"]]
+        for tmp, path in written:
+            if not (isinstance(exc, Exception) and failed in (store, paths["poles"]) and path == paths["failures"]):
+                atomic.discard(tmp)
         if isinstance(exc, Exception) and failed in (store, paths["poles"]):
             with contextlib.suppress(OSError):  # the first error is the one to report
-                atomic.write_atomically(paths["failures"], write_failures)
+                if failures_done:
+                    atomic.commit(*failures_done[0])
+                else:
+                    atomic.write_atomically(paths["failures"], write_failures)
         raise
     return (str(store), str(paths["poles"]), str(paths["failures"]))
 
@@ -263,3 +275,16 @@ def load_tracks(path):
     if "alarm" in ds:
         ds["alarm"] = ds["alarm"].astype(bool)
     return ds
+
+
+def _close_cached(path) -> None:
+    """Close and forget the files xarray's cache holds open for ``path`` (a NetCDF write that failed
+    part-way leaves its file there; open, its space stays in use after the temporary is removed)."""
+    from xarray.backends.file_manager import FILE_CACHE
+
+    for key, handle in list(FILE_CACHE.items()):
+        args = key[1] if len(key) > 1 else ()
+        if args and isinstance(args[0], (str, os.PathLike)) and os.fspath(args[0]) == os.fspath(path):
+            FILE_CACHE.pop(key, None)
+            with contextlib.suppress(Exception):  # closing may fail again on the full disk: the handle is dropped
+                handle.close()

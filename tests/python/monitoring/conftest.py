@@ -1,5 +1,7 @@
 """Fixtures of the monitoring tests: a simulated campaign, its serial run, a folder of its files."""
 
+import os
+
 import pytest
 from monitoring_support import SETTINGS
 
@@ -24,8 +26,15 @@ def csv_folder(tmp_path_factory):
     return folder, camp
 
 
-@pytest.fixture(autouse=True)
-def records_written_long_ago(monkeypatch):
+@pytest.fixture(autouse=True, scope="session")
+def records_written_long_ago():
     """The tests write their record files just before they run them: no wait for them to settle
-    (worker.SETTLE_SECONDS; test_faults_parts.py tests the wait)."""
-    monkeypatch.setenv("MODALUQ_SETTLE_SECONDS", "0")
+    (worker.SETTLE_SECONDS; test_faults_parts.py tests the wait, setting it itself). Session-wide,
+    so that module-scoped fixtures that run monitor() see it too."""
+    saved = os.environ.get("MODALUQ_SETTLE_SECONDS")
+    os.environ["MODALUQ_SETTLE_SECONDS"] = "0"
+    yield
+    if saved is None:
+        os.environ.pop("MODALUQ_SETTLE_SECONDS", None)
+    else:
+        os.environ["MODALUQ_SETTLE_SECONDS"] = saved

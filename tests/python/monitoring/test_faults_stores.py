@@ -163,6 +163,31 @@ def test_a_real_full_disk_leaves_the_previous_outputs_and_writes_the_failures(re
     xr.testing.assert_identical(load_tracks(paths["store"]), b.dataset)
 
 
+def test_a_writer_that_keeps_its_failed_file_open_does_not_keep_its_space(small_disk):
+    # netCDF's C library keeps its file open when closing fails on a full disk (found by
+    # scripts/fault_campaign.py: the failures table written after a failed store found no room).
+    # A writer that fills the disk and fails holding its descriptor, as netCDF does: once the
+    # write has failed, the space is back and the next output fits.
+    held = []
+
+    def fill_and_fail(tmp):
+        fd = os.open(tmp, os.O_WRONLY | os.O_CREAT)
+        held.append(fd)  # the library's handle, out of reach of Python
+        while True:
+            os.write(fd, b"\1" * 65536)  # ENOSPC ends it
+
+    free = shutil.disk_usage(small_disk).free
+    try:
+        with pytest.raises(OSError, match="No space left"):
+            atomic.write_temporary(small_disk / "tracks.nc", fill_and_fail)
+        assert shutil.disk_usage(small_disk).free >= free - 4096
+        atomic.write_atomically(small_disk / "tracks.failures.csv", lambda tmp: Path(tmp).write_text("record\n"))
+        assert leftovers(small_disk) == []
+    finally:
+        for fd in held:
+            os.close(fd)
+
+
 # ---- item 6: temporaries of dead writers, a store left half swapped ------------------------------------------
 
 
