@@ -115,6 +115,25 @@ def test_save_and_load_resume_the_stream_bit_for_bit(sim, uninterrupted, tmp_pat
         assert int(f["block_length"]) == 500 and int(f["end_sample"]) == 3_500
 
 
+def test_a_failed_save_leaves_the_previous_checkpoint(sim, tmp_path, monkeypatch):
+    acc = _accumulator()
+    _push(acc, sim, 0, 3_500)
+    path = tmp_path / "stream.ckpt"
+    acc.save(path)
+    before = path.read_bytes()
+    acc.push(sim.y[3_500:4_000], sim.u[3_500:4_000])
+
+    def full_disk(fh, **arrays):
+        fh.write(b"partial")
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(np, "savez", full_disk)
+    with pytest.raises(OSError, match=r"stream\.ckpt.*No space left"):
+        acc.save(path)
+    assert path.read_bytes() == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["stream.ckpt"]
+
+
 def _rewrite(path, out, **changes):
     with np.load(path, allow_pickle=False) as f:
         state = {k: f[k] for k in f.files}
