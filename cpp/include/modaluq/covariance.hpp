@@ -190,7 +190,9 @@ public:
     bool demean() const { return demean_; }
 
     /// Feed samples. `y` is n_outputs x n (a column is one sample), `u` is n_inputs x n
-    /// (ignored, and may be empty, when the layout has no inputs).
+    /// (ignored, and may be empty, when the layout has no inputs). A sample that is not finite
+    /// or beyond kMaxSampleMagnitude throws invalid_argument naming it (sample index in the
+    /// stream, channel) before anything changes: the accumulator goes on as if not called.
     void push(const Eigen::Ref<const Eigen::MatrixXd>& y,
               const Eigen::Ref<const Eigen::MatrixXd>& u = Eigen::MatrixXd()) {
         const Index n = y.cols();
