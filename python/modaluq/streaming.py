@@ -206,12 +206,14 @@ class CovarianceAccumulator:
             raise TypeError(f"CovarianceAccumulator.load() got unexpected keyword argument(s) {', '.join(unknown)}; "
                             f"it checks {', '.join(_EXPECTABLE)}")
         path = os.fspath(path)
+        with open(path, "rb") as fh:  # a missing file is the OSError naming it
+            magic = fh.read(4)
+        if magic != b"PK\x03\x04":  # np.load would take it for a .npy or a pickle
+            raise ValueError(f"{path}: not a CovarianceAccumulator checkpoint (not an .npz archive)")
         try:
             archive = np.load(path, allow_pickle=False)
         except (ValueError, EOFError, zipfile.BadZipFile) as exc:
             raise ValueError(f"{path}: not a CovarianceAccumulator checkpoint (not an .npz archive: {exc})") from None
-        if not isinstance(archive, np.lib.npyio.NpzFile):
-            raise ValueError(f"{path}: not a CovarianceAccumulator checkpoint (a .npy array, not an .npz archive)")
         with archive:
             try:
                 state = {name: archive[name] for name in archive.files}

@@ -172,6 +172,11 @@ def test_a_checkpoint_it_cannot_read_is_refused_by_name(sim, tmp_path):
             tail = f["tail"].copy()
         tail[0, 0] = np.nan
         load(_rewrite(path, tmp_path / "nan.npz", tail=tail))
+    (tmp_path / "text.npz").write_text("not a checkpoint")
+    with pytest.raises(ValueError, match=r"text\.npz: not a CovarianceAccumulator checkpoint \(not an \.npz"):
+        load(tmp_path / "text.npz")
+    with pytest.raises(FileNotFoundError, match="absent.npz"):
+        load(tmp_path / "absent.npz")
     # A checkpoint of other settings than the caller expects.
     with pytest.raises(ValueError, match=r"good\.npz.*block_rows is 8, expected 12"):
         load(path, block_rows=12)
