@@ -8,6 +8,7 @@
 #include <modaluq/covariance.hpp>
 
 #include <atomic>
+#include <memory>
 #include <stdexcept>
 
 #include "bindings.hpp"
@@ -69,8 +70,33 @@ void modaluq::python::bind_covariance(py::module_& m) {
         .def("covariance_factor",
              static_cast<Eigen::MatrixXd (Covariances::*)() const&>(&Covariances::covariance_factor));
 
+    using State = CovarianceAccumulatorState;
+    py::class_<State>(m, "CovarianceAccumulatorState")
+        .def(py::init<>())
+        .def_readwrite("layout", &State::layout)
+        .def_readwrite("block_length", &State::block_length)
+        .def_readwrite("demean", &State::demean)
+        .def_readwrite("first_sample", &State::first_sample)
+        .def_readwrite("end_sample", &State::end_sample)
+        .def_readwrite("shift", &State::shift)
+        .def_readwrite("total_sum", &State::total_sum)
+        .def_readwrite("head", &State::head)
+        .def_readwrite("tail", &State::tail)
+        .def_readwrite("block_index", &State::block_index)
+        .def_readwrite("block_count", &State::block_count)
+        .def_readwrite("block_sums", &State::block_sums)
+        .def_readwrite("window_start", &State::window_start)
+        .def_readwrite("window_samples", &State::window_samples);
+
     using G = GuardedAccumulator;
+    // A copy of the state under the guard (a push in another thread must not run during it).
+    const auto copy_of = [](G& g) {
+        G::Use use(g);
+        return std::unique_ptr<G>(new G{g.acc});
+    };
     py::class_<G>(m, "CovarianceAccumulator")
+        .def_property_readonly_static("max_sample_magnitude",
+                                      [](const py::object&) { return CovarianceAccumulator::kMaxSampleMagnitude; })
         .def(py::init([](HankelLayout layout, Index block_length, bool demean, Index first_sample) {
                  return new G{CovarianceAccumulator(std::move(layout), block_length, demean, first_sample)};
              }),
@@ -114,7 +140,18 @@ void modaluq::python::bind_covariance(py::module_& m) {
                 G::Use use(g);
                 return g.acc.finish(with_blocks);
             },
-            py::arg("with_blocks") = true, py::call_guard<py::gil_scoped_release>());
+            py::arg("with_blocks") = true, py::call_guard<py::gil_scoped_release>())
+        .def("export_state",
+             [](G& g) {
+                 G::Use use(g);
+                 return g.acc.export_state();
+             })
+        .def_static(
+            "from_state",
+            [](const State& state) { return std::unique_ptr<G>(new G{CovarianceAccumulator::from_state(state)}); },
+            py::arg("state"))
+        .def("__copy__", copy_of)
+        .def("__deepcopy__", [copy_of](G& g, const py::dict&) { return copy_of(g); }, py::arg("memo"));
 
     m.def("compute_covariances", &compute_covariances, py::arg("y_t").noconvert(), py::arg("u_t").noconvert(),
           py::arg("layout"), py::arg("n_blocks"), py::arg("demean") = true, py::arg("with_blocks") = true,

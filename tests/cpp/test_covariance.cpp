@@ -244,3 +244,149 @@ TEST_CASE("covariance errors name the argument") {
     CHECK_THROWS_WITH_AS(modaluq::compute_covariances(MatrixXd::Random(2, 100), MatrixXd(), layout(2, 0, 3, 3), 50),
                          doctest::Contains("at least 305 samples"), modaluq::invalid_argument);
 }
+
+namespace {
+
+template <class A, class B>
+bool same(const Eigen::MatrixBase<A>& a, const Eigen::MatrixBase<B>& b) {
+    return a.rows() == b.rows() && a.cols() == b.cols() && (a.size() == 0 || a == b);
+}
+
+bool same_state(const CovarianceAccumulator::State& a, const CovarianceAccumulator::State& b) {
+    return a.block_length == b.block_length && a.demean == b.demean && a.first_sample == b.first_sample &&
+           a.end_sample == b.end_sample && same(a.shift, b.shift) && same(a.total_sum, b.total_sum) &&
+           same(a.head, b.head) && same(a.tail, b.tail) && same(a.block_index, b.block_index) &&
+           same(a.block_count, b.block_count) && same(a.block_sums, b.block_sums) &&
+           same(a.window_start, b.window_start) && same(a.window_samples, b.window_samples);
+}
+
+/// Bit for bit: R1..R4, the per-block covariances and the mean.
+bool same_covariances(const modaluq::Covariances& a, const modaluq::Covariances& b) {
+    return same(a.R1, b.R1) && same(a.R2, b.R2) && same(a.R3, b.R3) && same(a.R4, b.R4) && same(a.blocks, b.blocks) &&
+           same(a.channel_mean, b.channel_mean) && a.n_blocks == b.n_blocks;
+}
+
+/// Push columns [from, to) of y, u in chunks of `step`.
+void push_range(CovarianceAccumulator& acc, const Sim& s, Index from, Index to, Index step = 333) {
+    for (Index pos = from; pos < to; pos += step) {
+        const Index n = std::min(step, to - pos);
+        acc.push(s.y.middleCols(pos, n), s.u.middleCols(pos, n));
+    }
+}
+
+}  // namespace
+
+TEST_CASE("export_state then from_state continues the stream bit for bit; a copy is a copy") {
+    const Sim s = simulate(3, {0, 1, 2}, 3000, 17, true, 0.3, 0.05);
+    const auto L = layout(3, 1, 4, 5, {0, 2});  // max_lag 8
+    const Index Nb = 250;
+    CovarianceAccumulator whole(L, Nb);
+    push_range(whole, s, 0, 3000);
+    const auto ref = whole.finish();
+    // Cut before any sample, within the first max_lag samples, mid-block, at a block boundary
+    // and at the boundary plus max_lag.
+    for (Index cut : {Index(0), Index(3), Index(1111), Index(4 * Nb), Index(4 * Nb + 8)}) {
+        CAPTURE(cut);
+        CovarianceAccumulator acc(L, Nb);
+        push_range(acc, s, 0, cut);
+        const auto state = acc.export_state();
+        CovarianceAccumulator resumed = CovarianceAccumulator::from_state(state);
+        CHECK(same_state(resumed.export_state(), state));
+        CovarianceAccumulator copy = acc;  // a real copy: pushing into it leaves acc alone
+        copy.push(s.y.leftCols(50), s.u.leftCols(50));
+        CHECK(same_state(acc.export_state(), state));
+        push_range(acc, s, cut, 3000);
+        push_range(resumed, s, cut, 3000);
+        CHECK(same_state(resumed.export_state(), acc.export_state()));
+        CHECK(same_covariances(resumed.finish(), acc.finish()));
+        CHECK(rel(resumed.finish().blocks, ref.blocks) < 1e-12);
+    }
+    SUBCASE("spans and merged accumulators") {
+        CovarianceAccumulator a(L, Nb), b(L, Nb, true, 1300), a2(L, Nb), b2(L, Nb, true, 1300);
+        push_range(a, s, 0, 1300);
+        push_range(b, s, 1300, 2000);
+        push_range(a2, s, 0, 1300);
+        push_range(b2, s, 1300, 2000);
+        CovarianceAccumulator b_resumed = CovarianceAccumulator::from_state(b.export_state());
+        a.merge(b);
+        a2.merge(b_resumed);
+        CHECK(same_state(a.export_state(), a2.export_state()));
+        // The state of a merged accumulator is one from_state accepts, and it continues.
+        CovarianceAccumulator merged = CovarianceAccumulator::from_state(a.export_state());
+        push_range(a, s, 2000, 3000);
+        push_range(merged, s, 2000, 3000);
+        CHECK(same_covariances(merged.finish(), a.finish()));
+        // A span shorter than max_lag, merged.
+        CovarianceAccumulator c(L, Nb), d(L, Nb, true, 5);
+        push_range(c, s, 0, 5);
+        push_range(d, s, 5, 7);
+        c.merge(CovarianceAccumulator::from_state(d.export_state()));
+        CHECK(same_state(CovarianceAccumulator::from_state(c.export_state()).export_state(), c.export_state()));
+    }
+}
+
+TEST_CASE("from_state refuses a state that no accumulator can reach, naming the field") {
+    const Sim s = simulate(3, {0, 1, 2}, 1500, 19, true, 0.3, 0.05);
+    const auto L = layout(3, 1, 4, 5);
+    CovarianceAccumulator acc(L, 200);
+    push_range(acc, s, 0, 1111);
+    const auto good = acc.export_state();
+    const auto refused = [&](auto change, const char* says) {
+        CAPTURE(says);
+        auto bad = good;
+        change(bad);
+        CHECK_THROWS_WITH_AS(CovarianceAccumulator::from_state(bad), doctest::Contains(says), modaluq::invalid_argument);
+    };
+    using State = CovarianceAccumulator::State;
+    refused([](State& b) { b.layout.block_rows = 5; }, "head has shape 4 x 8, expected 4 x 9");
+    refused([](State& b) { b.layout.n_inputs = 0; }, "shift has shape 4 x 1, expected 3 x 1");
+    refused([](State& b) { b.layout.block_rows = 1; }, "block_rows must be >= 2");
+    refused([](State& b) { b.block_length = 300; }, "block_index and block_count have 6 and 6 entries, expected 4");
+    refused([](State& b) { b.end_sample += 1; }, "block_count[5] is 103, but block 5 holds 104");
+    refused([](State& b) { b.end_sample = -1; }, "end_sample (-1) is before first_sample (0)");
+    refused([](State& b) { b.first_sample = 3; }, "block_count[0] is 200, but block 0 holds 197");
+    refused([](State& b) { b.block_index(2) = 7; }, "block_index[2] is 7, expected 2");
+    refused([](State& b) { b.block_sums.conservativeResize(b.block_sums.rows() - 1, Eigen::NoChange); },
+            "block_sums has shape");
+    refused([](State& b) { b.block_sums(3, 1) = std::numeric_limits<double>::infinity(); }, "block_sums holds");
+    refused([](State& b) { b.tail(1, 2) = std::numeric_limits<double>::quiet_NaN(); }, "tail holds");
+    refused([](State& b) { b.shift(0) = 1e70; }, "shift holds");
+    refused([](State& b) { b.window_start(1) += 1; }, "window_start[1] is 201, expected 200");
+    refused([](State& b) { b.window_samples.resize(0, 0); }, "window_samples has shape 0 x 0");
+    refused([](State& b) { b.head.resize(4, 3); }, "head has shape 4 x 3");
+    // An empty accumulator has no shift yet.
+    auto empty = CovarianceAccumulator(L, 200).export_state();
+    CHECK(CovarianceAccumulator::from_state(empty).n_samples() == 0);
+    empty.shift(1) = 2.0;
+    CHECK_THROWS_WITH_AS(CovarianceAccumulator::from_state(empty), doctest::Contains("must be zero when no sample"),
+                         modaluq::invalid_argument);
+}
+
+TEST_CASE("a sample whose products would overflow is refused at push, and the accumulator goes on") {
+    const Sim s = simulate(3, {0, 1, 2}, 3000, 23, true, 0.3, 0.05);
+    const auto L = layout(3, 1, 4, 4);
+    CovarianceAccumulator clean(L, 300), acc(L, 300);
+    push_range(clean, s, 0, 1000);
+    push_range(clean, s, 1000, 3000);
+    push_range(acc, s, 0, 1000);
+    const auto before = acc.export_state();
+    MatrixXd y = s.y.middleCols(1000, 500), u = s.u.middleCols(1000, 500);
+    y(1, 7) = 1e200;  // finite, but its square is not
+    CHECK_THROWS_WITH_AS(acc.push(y, u), doctest::Contains("y: sample 1007, channel 1 is 1e+200"),
+                         modaluq::invalid_argument);
+    y(1, 7) = s.y(1, 1007);
+    u(0, 499) = -1e61;
+    CHECK_THROWS_WITH_AS(acc.push(y, u), doctest::Contains("u: sample 1499, channel 0 is -1e+61"),
+                         modaluq::invalid_argument);
+    CHECK(same_state(acc.export_state(), before));  // nothing of the refused pushes went in
+    push_range(acc, s, 1000, 3000);
+    CHECK(same_covariances(acc.finish(), clean.finish()));
+    // The limit itself is accepted, as the first sample (the shift) too; the batch pass refuses the same.
+    CovarianceAccumulator edge(layout(1, 0, 2, 2), 4);
+    edge.push(MatrixXd::Constant(1, 3, -CovarianceAccumulator::kMaxSampleMagnitude));
+    CHECK(edge.n_samples() == 3);
+    MatrixXd big = s.y;
+    big(2, 2500) = 2e60;
+    CHECK_THROWS_WITH_AS(modaluq::compute_covariances(big, MatrixXd(), layout(3, 0, 4, 4), 5),
+                         doctest::Contains("y: sample 2500, channel 2 is 2e+60"), modaluq::invalid_argument);
+}

@@ -19,6 +19,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstddef>
+#include <limits>
 #include <map>
 #include <sstream>
 #include <vector>
@@ -66,10 +67,49 @@ private:
     }
 };
 
+/// Everything a CovarianceAccumulator holds, as plain data (sans-IO): export_state() gives it and
+/// CovarianceAccumulator::from_state() rebuilds an accumulator that continues bit for bit, so a
+/// caller can checkpoint a stream in any format it likes (the Python package: pickle, .npz).
+/// With d = layout.n_channels(), L = layout.max_lag() and n = end_sample - first_sample samples,
+/// and samples stored shifted (x = z - shift, see the file comment):
+struct CovarianceAccumulatorState {
+    using IndexVector = Eigen::Matrix<Index, Eigen::Dynamic, 1>;
+    HankelLayout layout;
+    Index block_length = 0;          ///< N_b
+    bool demean = true;
+    Index first_sample = 0;          ///< first sample of the span
+    Index end_sample = 0;            ///< one past the last sample pushed
+    Eigen::VectorXd shift;           ///< d: the first sample (zeros while n = 0)
+    Eigen::VectorXd total_sum;       ///< d: sum of the shifted samples
+    Eigen::MatrixXd head;            ///< d x min(L, n): the first shifted samples
+    Eigen::MatrixXd tail;            ///< d x min(L, n): the last ones (their base times wait for more samples)
+    /// Blocks k that meet the base times summed so far, [first_sample, max(first_sample, end_sample - L)),
+    /// increasing; block_count holds how many of those base times each block has.
+    IndexVector block_index, block_count;
+    /// ((L+1) d (d+1)) x blocks: column j is the column-major vec of block block_index[j]'s lag sums,
+    /// the ((L+1) d) x (d+1) matrix whose rows l d .. l d + d - 1 are [sum x_{t+l} x_t^T | sum x_{t+l}].
+    Eigen::MatrixXd block_sums;
+    /// Boundaries b = k N_b in [first_sample, end_sample), increasing, and (d L) x boundaries: column j
+    /// is the vec of the d x L shifted samples from window_start[j] (the first min(L, end_sample - b) are
+    /// set, the others are placeholders overwritten as samples arrive).
+    IndexVector window_start;
+    Eigen::MatrixXd window_samples;
+};
+
 /// Accumulates R1..R4 from chunks of samples of any length. Any chunking of a record gives
 /// the batch result; accumulators over consecutive spans can be merged.
 class CovarianceAccumulator {
 public:
+    using State = CovarianceAccumulatorState;
+
+    /// Largest magnitude of a sample that push accepts. The covariances hold sums of products of
+    /// two samples over up to 2^63 columns, and identify forms products of two covariances (H with
+    /// inputs, its norm): fourth powers of the samples. 1e60^4 = 1e240 leaves room for the counts
+    /// below DBL_MAX (1.8e308), so nothing an accepted sample enters can overflow. A glitch of 1e90
+    /// made every later identify on the accumulator fail (|H| not finite); no unit of a measurement
+    /// comes near 1e60.
+    static constexpr double kMaxSampleMagnitude = 1e60;
+
     /// @param layout        channels and horizons (validated)
     /// @param block_length  N_b, Hankel columns per block (>= p + q)
     /// @param demean        remove each channel's mean over the whole record
@@ -93,6 +133,55 @@ public:
         tail_.resize(d_, 0);
     }
 
+    // A copy is a real copy: the state is values (Eigen matrices, std::maps), nothing is shared.
+    CovarianceAccumulator(const CovarianceAccumulator&) = default;
+    CovarianceAccumulator(CovarianceAccumulator&&) = default;
+    CovarianceAccumulator& operator=(const CovarianceAccumulator&) = default;
+    CovarianceAccumulator& operator=(CovarianceAccumulator&&) = default;
+
+    /// The whole state as plain data (see CovarianceAccumulatorState).
+    State export_state() const {
+        State s;
+        s.layout = layout_;
+        s.block_length = block_length_;
+        s.demean = demean_;
+        s.first_sample = first_;
+        s.end_sample = end_;
+        s.shift = shift_;
+        s.total_sum = total_sum_;
+        s.head = head_;
+        s.tail = tail_;
+        const Index per_block = (lag_ + 1) * d_ * (d_ + 1), nb = static_cast<Index>(blocks_.size());
+        s.block_index.resize(nb);
+        s.block_count.resize(nb);
+        s.block_sums.resize(per_block, nb);
+        Index j = 0;
+        for (const auto& [k, blk] : blocks_) {
+            s.block_index(j) = k;
+            s.block_count(j) = blk.count;
+            s.block_sums.col(j++) = Eigen::Map<const Eigen::VectorXd>(blk.sums.data(), per_block);
+        }
+        const Index nw = static_cast<Index>(windows_.size());
+        s.window_start.resize(nw);
+        s.window_samples.resize(d_ * lag_, nw);
+        j = 0;
+        for (const auto& [b, w] : windows_) {
+            s.window_start(j) = b;
+            s.window_samples.col(j++) = Eigen::Map<const Eigen::VectorXd>(w.x.data(), d_ * lag_);
+        }
+        return s;
+    }
+
+    /// The accumulator whose export_state() is `state`: pushing into it continues the stream
+    /// exactly as the exported accumulator would. The state is validated first (shapes against
+    /// its layout, the blocks and counts against its sample range, finite values): a
+    /// modaluq::invalid_argument names the field that is wrong.
+    static CovarianceAccumulator from_state(const State& state) {
+        CovarianceAccumulator acc(state.layout, state.block_length, state.demean, state.first_sample);
+        acc.import_state(state);
+        return acc;
+    }
+
     const HankelLayout& layout() const { return layout_; }
     Index block_length() const { return block_length_; }
     Index first_sample() const { return first_; }
@@ -101,7 +190,9 @@ public:
     bool demean() const { return demean_; }
 
     /// Feed samples. `y` is n_outputs x n (a column is one sample), `u` is n_inputs x n
-    /// (ignored, and may be empty, when the layout has no inputs).
+    /// (ignored, and may be empty, when the layout has no inputs). A sample that is not finite
+    /// or beyond kMaxSampleMagnitude throws invalid_argument naming it (sample index in the
+    /// stream, channel) before anything changes: the accumulator goes on as if not called.
     void push(const Eigen::Ref<const Eigen::MatrixXd>& y,
               const Eigen::Ref<const Eigen::MatrixXd>& u = Eigen::MatrixXd()) {
         const Index n = y.cols();
@@ -115,6 +206,9 @@ public:
         }
         detail::require_finite(y, "y", end_);
         if (layout_.n_inputs > 0) detail::require_finite(u, "u", end_);
+        // Before any state changes: a refused push leaves the accumulator as it was.
+        require_magnitude(y, "y");
+        if (layout_.n_inputs > 0) require_magnitude(u, "u");
         if (n == 0) return;
 
         if (!has_shift_) {
@@ -273,6 +367,7 @@ private:
 
     static constexpr Index kPiece = 1 << 15;  // samples per piece of a push
     static constexpr Index kMaxBlockLength = Index(1) << 50;  // sample indices stay far from overflow
+    static constexpr Index kMaxSampleIndex = Index(1) << 62;  // end_sample of an imported state
 
     HankelLayout layout_;
     Index block_length_;
@@ -286,6 +381,99 @@ private:
     std::map<Index, Window> windows_;     // keyed by boundary sample b = k N_b
     Eigen::MatrixXd head_;                // first min(L, n) shifted samples
     Eigen::MatrixXd tail_;                // last min(L, n) shifted samples (pending base times)
+
+    /// Refuse a push holding a sample beyond kMaxSampleMagnitude, naming it (x is channels x
+    /// samples, finite; its first sample is sample end_ of the stream).
+    void require_magnitude(const Eigen::Ref<const Eigen::MatrixXd>& x, const char* what) const {
+        if (x.size() == 0 || x.cwiseAbs().maxCoeff() <= kMaxSampleMagnitude) return;
+        for (Index s = 0; s < x.cols(); ++s)
+            for (Index c = 0; c < x.rows(); ++c)
+                if (std::abs(x(c, s)) > kMaxSampleMagnitude) {
+                    std::ostringstream value;
+                    value.precision(10);
+                    value << x(c, s);
+                    detail::fail(what, ": sample ", end_ + s, ", channel ", c, " is ", value.str(),
+                                 ": samples beyond 1e60 in magnitude are refused, as their products in the "
+                                 "covariances and in the identification would overflow (not finite); rescale the data "
+                                 "(e.g. to SI units) or remove the glitch (nothing of this push was added)");
+                }
+    }
+
+    /// Fill a freshly constructed accumulator (layout, block length, demean and first sample
+    /// set and validated) from `s`, after checking that `s` is a state such an accumulator can
+    /// reach: push and merge keep exactly the blocks and boundaries checked here.
+    void import_state(const State& s) {
+        using detail::require;
+        const Index first = first_, end = s.end_sample, nb = block_length_;
+        require(end >= first, "state: end_sample (", end, ") is before first_sample (", first, ")");
+        require(end <= kMaxSampleIndex, "state: end_sample must be <= 2^62, got ", end);
+        const Index n = end - first, kept = std::min(lag_, n);
+        const auto shape = [&](const char* name, Index rows, Index cols, Index want_rows, Index want_cols) {
+            require(rows == want_rows && cols == want_cols, "state: ", name, " has shape ", rows, " x ", cols,
+                    ", expected ", want_rows, " x ", want_cols, " for ", d_, " channels, block_rows + past_block_rows = ",
+                    layout_.window(), ", block_length = ", nb, " and ", n, " samples");
+        };
+        const auto values = [&](const char* name, const Eigen::MatrixXd& m, double bound) {
+            require(m.allFinite() && (m.size() == 0 || m.cwiseAbs().maxCoeff() <= bound), "state: ", name,
+                    " holds a value that is not finite or beyond ", bound, " in magnitude");
+        };
+        // Samples: raw ones up to the push limit, shifted ones (differences of two, re-shifted by
+        // merges) up to twice it, with room for rounding.
+        const double raw = kMaxSampleMagnitude, shifted = 4 * kMaxSampleMagnitude;
+        shape("shift", s.shift.rows(), s.shift.cols(), d_, 1);
+        shape("total_sum", s.total_sum.rows(), s.total_sum.cols(), d_, 1);
+        shape("head", s.head.rows(), s.head.cols(), d_, kept);
+        shape("tail", s.tail.rows(), s.tail.cols(), d_, kept);
+        values("shift", s.shift, raw);
+        values("total_sum", s.total_sum, std::numeric_limits<double>::max());
+        values("head", s.head, shifted);
+        values("tail", s.tail, shifted);
+        if (n == 0)
+            require(s.shift.isZero(0.0) && s.total_sum.isZero(0.0),
+                    "state: shift and total_sum must be zero when no sample was pushed");
+
+        // Lag sums: one block per block meeting the base times [first, t_end), with its count.
+        const Index t_end = std::max(first, end - lag_);
+        const Index k0 = first / nb, n_blocks = t_end > first ? (t_end - 1) / nb - k0 + 1 : 0;
+        require(s.block_index.size() == n_blocks && s.block_count.size() == n_blocks, "state: block_index and ",
+                "block_count have ", s.block_index.size(), " and ", s.block_count.size(), " entries, expected ",
+                n_blocks, " (the blocks of ", nb, " base times meeting [", first, ", ", t_end, "))");
+        shape("block_sums", s.block_sums.rows(), s.block_sums.cols(), (lag_ + 1) * d_ * (d_ + 1), n_blocks);
+        values("block_sums", s.block_sums, std::numeric_limits<double>::max());
+        for (Index j = 0; j < n_blocks; ++j) {
+            const Index k = k0 + j, count = std::min((k + 1) * nb, t_end) - std::max(k * nb, first);
+            require(s.block_index(j) == k, "state: block_index[", j, "] is ", s.block_index(j), ", expected ", k);
+            require(s.block_count(j) == count, "state: block_count[", j, "] is ", s.block_count(j), ", but block ",
+                    k, " holds ", count, " of the base times [", first, ", ", t_end, ")");
+        }
+        // Boundary windows: one per boundary k N_b in [first, end).
+        const Index w0 = detail::ceil_div(first, nb), n_windows = end > first ? std::max<Index>(0, (end - 1) / nb - w0 + 1) : 0;
+        require(s.window_start.size() == n_windows, "state: window_start has ", s.window_start.size(),
+                " entries, expected ", n_windows, " (the block boundaries in [", first, ", ", end, "))");
+        shape("window_samples", s.window_samples.rows(), s.window_samples.cols(), d_ * lag_, n_windows);
+        values("window_samples", s.window_samples, shifted);
+        for (Index j = 0; j < n_windows; ++j)
+            require(s.window_start(j) == (w0 + j) * nb, "state: window_start[", j, "] is ", s.window_start(j),
+                    ", expected ", (w0 + j) * nb);
+
+        end_ = end;
+        has_shift_ = n > 0;
+        shift_ = s.shift;
+        total_sum_ = s.total_sum;
+        head_ = s.head;
+        tail_ = s.tail;
+        for (Index j = 0; j < n_blocks; ++j) {
+            BlockSums blk{Eigen::Map<const Eigen::MatrixXd>(s.block_sums.col(j).data(), (lag_ + 1) * d_, d_ + 1),
+                          s.block_count(j)};
+            blocks_.emplace_hint(blocks_.end(), s.block_index(j), std::move(blk));
+        }
+        for (Index j = 0; j < n_windows; ++j) {
+            const Index b = s.window_start(j);
+            Window w{Eigen::Map<const Eigen::MatrixXd>(s.window_samples.col(j).data(), d_, lag_),
+                     std::min(lag_, end - b)};
+            windows_.emplace_hint(windows_.end(), b, std::move(w));
+        }
+    }
 
     bool same_layout(const HankelLayout& o) const {
         return o.n_outputs == layout_.n_outputs && o.n_inputs == layout_.n_inputs &&
