@@ -393,7 +393,8 @@ def full_disk(kind: str, base: Path, records: list, cov: str, ref: dict) -> dict
             f"{'written' if failures_written else 'MISSING'}; after freeing space: "
             f"{'identical' if resumed else 'DIFFERS'}" + (f"  PROBLEMS: {problems}" if problems else ""))
     finally:
-        subprocess.run(["umount", str(mnt)], check=False)
+        if subprocess.run(["umount", str(mnt)], capture_output=True).returncode != 0:
+            subprocess.run(["umount", "-l", str(mnt)], check=False)  # busy: detach it all the same
     return {"kind": kind, "problems": problems}
 
 
