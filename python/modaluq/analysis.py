@@ -80,7 +80,7 @@ def describe_orders(orders) -> str:
     return ", ".join(map(str, orders))
 
 
-def _warnings_of_selection(result: Result, selected: SelectedModes, fs: float) -> list:
+def _warnings_of_selection(result: Result, selected: SelectedModes) -> list:
     """The identification's warnings, with the one on slowly decaying poles (``Result.slow_decay``)
     said of the selected modes, by the core's flag of each representative pole (blocks shorter
     than half the decay time 1/(2π f ξ)): the core counts every pole of every order, mostly
@@ -261,7 +261,7 @@ class Analysis:
         self.diagram = stabilization_diagram(result, self.criteria, output_names=self.output_names)
         step("clustering")
         self.selected = select_modes(self.diagram, self.clustering)
-        self.warnings = tuple(_warnings_of_selection(result, self.selected, pre.fs))
+        self.warnings = tuple(_warnings_of_selection(result, self.selected))
         if issue_warnings:
             for w in self.warnings:
                 warnings.warn(w, ModalUQWarning, stacklevel=2)

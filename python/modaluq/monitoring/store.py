@@ -12,7 +12,6 @@ complex shapes (:data:`COMPLEX_SHAPES`) are stored as their real and imaginary p
 from __future__ import annotations
 
 import contextlib
-import os
 from pathlib import Path
 
 import numpy as np
@@ -206,11 +205,7 @@ def write(result, paths: dict) -> tuple:
     store = paths["store"]
     if paths["kind"] == "netcdf":
         def write_store(tmp):
-            try:
-                ds.to_netcdf(tmp)
-            except BaseException:
-                _close_cached(tmp)  # xarray may keep the failed file open in its cache
-                raise
+            ds.to_netcdf(tmp)
     else:
         import zarr
 
@@ -275,16 +270,3 @@ def load_tracks(path):
     if "alarm" in ds:
         ds["alarm"] = ds["alarm"].astype(bool)
     return ds
-
-
-def _close_cached(path) -> None:
-    """Close and forget the files xarray's cache holds open for ``path`` (a NetCDF write that failed
-    part-way leaves its file there; open, its space stays in use after the temporary is removed)."""
-    from xarray.backends.file_manager import FILE_CACHE
-
-    for key, handle in list(FILE_CACHE.items()):
-        args = key[1] if len(key) > 1 else ()
-        if args and isinstance(args[0], (str, os.PathLike)) and os.fspath(args[0]) == os.fspath(path):
-            FILE_CACHE.pop(key, None)
-            with contextlib.suppress(Exception):  # closing may fail again on the full disk: the handle is dropped
-                handle.close()

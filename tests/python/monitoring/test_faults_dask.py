@@ -49,17 +49,14 @@ def test_every_comm_of_a_started_cluster_is_tls(started):
 @pytest.mark.parametrize("how", ["plain tcp", "tls without a certificate", "tls with another certificate"])
 def test_a_client_without_the_cluster_key_cannot_connect(started, how):
     host, port = _host_port(started.scheduler.address)
-    if how == "plain tcp":
-        address, security = f"tcp://{host}:{port}", None
-    else:
-        address = f"tls://{host}:{port}"
-        security = None if how == "tls without a certificate" else distributed.security.Security.temporary()
+    address = f"{'tcp' if how == 'plain tcp' else 'tls'}://{host}:{port}"
+    security = "distributed.security.Security.temporary()" if how == "tls with another certificate" else "None"
     # no code of this client may run on the workers: it never gets a connection. In a process of its
     # own, killed after a minute: a client refused by TLS may retry or hang instead of failing fast,
     # and must not hang the suite (a process that ran the code prints RAN before anything else)
     code = (
         "import sys, distributed\n"
-        f"security = {'None' if security is None else 'distributed.security.Security.temporary()'}\n"
+        f"security = {security}\n"
         "try:\n"
         f"    with distributed.Client({address!r}, security=security, timeout='3s', set_as_default=False) as c:\n"
         "        print('RAN', c.submit(sum, [1, 2]).result(timeout=3), flush=True)\n"
