@@ -17,6 +17,7 @@ import numpy as np
 import pytest
 
 import modaluq
+from memory_probe import PROBE
 from modaluq import auto_settings, checks
 from modaluq.checks import MEMORY_LIMIT_ENV, available_memory, check_cost, estimate_cost
 
@@ -133,18 +134,11 @@ MEASURE = """
     import modaluq
     from modaluq.checks import estimate_cost
     y = np.ascontiguousarray(modaluq.simulate(20_000, seed=1).y)
-    def status(field):
-        for line in open("/proc/self/status"):
-            if line.startswith(field):
-                return int(line.split()[1]) * 1024
-    # ru_maxrss (getrusage) keeps the parent's RSS at the fork: pytest's, not this process's.
-    # VmHWM is this process's own peak; writing 5 to clear_refs resets it to the RSS now.
-    with open("/proc/self/clear_refs", "w") as f:
-        f.write("5")
-    before = status("VmRSS")
+    reset_peak()
+    before = memory("VmRSS")
     kw = json.loads(sys.argv[1] if len(sys.argv) > 1 else '{cfg}')
     r = modaluq.identify(y, fs=50.0, **kw)
-    peak = status("VmHWM")
+    peak = memory("VmHWM")
     s = r.settings
     est = estimate_cost(y.shape[0], 3, 0, block_rows=s["block_rows"], orders=s["orders"], n_blocks=s["n_blocks"] or 2,
                         uncertainty=s["uncertainty"], threads=s["threads"])
@@ -160,9 +154,9 @@ MEASURE = """
     {"block_rows": 450, "orders": 60, "uncertainty": False},          # the SVD of H alone
 ])
 def test_estimate_is_conservative_against_measured_peak(cfg):
-    """Peak RSS of the identification in a fresh process (ru_maxrss less the RSS before it):
+    """Peak RSS of the identification in a fresh process (its VmHWM less the RSS before it):
     the estimate is at least that and at most 4 times it."""
-    out = run_python(MEASURE.replace("{cfg}", json.dumps(cfg)), env={"OPENBLAS_NUM_THREADS": "1"})
+    out = run_python(PROBE + textwrap.dedent(MEASURE.replace("{cfg}", json.dumps(cfg))), env={"OPENBLAS_NUM_THREADS": "1"})
     measured, estimate = json.loads(out.stdout.strip().splitlines()[-1])
     assert measured > 20e6, out.stderr  # large enough to be measured
     assert measured <= estimate <= 4 * measured, (cfg, measured, estimate)

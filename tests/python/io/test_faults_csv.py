@@ -17,6 +17,7 @@ import pytest
 
 import modaluq
 import modaluq.io.csv as csv_loader
+from memory_probe import PROBE
 from modaluq.io import read_csv
 
 PYTHON_DIR = str(Path(modaluq.__file__).resolve().parents[1])
@@ -95,17 +96,10 @@ PEAK = """
     with open(small, "w") as f:
         f.write("time,a\\n0,1\\n0.01,2\\n0.02,3\\n")
     read_csv(small)  # the modules the loader imports: part of the baseline
-    def status(field):
-        for line in open("/proc/self/status"):
-            if line.startswith(field):
-                return int(line.split()[1]) * 1024
-    # ru_maxrss (getrusage) keeps the parent's RSS at the fork: pytest's, not this process's.
-    # VmHWM is this process's own peak; writing 5 to clear_refs resets it to the RSS now.
-    with open("/proc/self/clear_refs", "w") as f:
-        f.write("5")
-    before = status("VmRSS")
+    reset_peak()
+    before = memory("VmRSS")
     rec = read_csv(sys.argv[1], **json.loads(sys.argv[2]))
-    peak = status("VmHWM")
+    peak = memory("VmHWM")
     print(json.dumps([peak - before, rec.y.nbytes, rec.y.shape[0] * 8]))
 """
 
@@ -126,7 +120,7 @@ def csv_50mb(tmp_path_factory):
 
 
 def peak_of(path, **options):
-    out = subprocess.run([sys.executable, "-c", textwrap.dedent(PEAK), str(path), json.dumps(options)],
+    out = subprocess.run([sys.executable, "-c", PROBE + textwrap.dedent(PEAK), str(path), json.dumps(options)],
                          capture_output=True, text=True, timeout=300,
                          env={**os.environ, "PYTHONPATH": PYTHON_DIR + os.pathsep + os.environ.get("PYTHONPATH", "")})
     assert out.returncode == 0, out.stderr

@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 
 import modaluq.io as mio
+from memory_probe import PROBE
 from modaluq.io import _common, hdf5, read_hdf5, read_matlab
 
 h5py = pytest.importorskip("h5py")
@@ -213,18 +214,14 @@ def _tiny_declaring_huge(path, how):
 @pytest.mark.parametrize("how", ["chunked", "fill_value", "contiguous"])
 def test_tiny_file_declaring_2gb_refused_without_allocating(tmp_path, how):
     p = _tiny_declaring_huge(tmp_path / f"huge_{how}.h5", how)
-    # the child's own peak: VmHWM after resetting it (ru_maxrss would count the memory of the
-    # forked parent, pytest, hundreds of MB into a full run)
-    code = textwrap.dedent(f"""
+    code = PROBE + textwrap.dedent(f"""
         import modaluq.io as mio
-        with open("/proc/self/clear_refs", "w") as f:
-            f.write("5")
+        reset_peak()  # the child's own peak (memory_probe)
         try:
             mio.read_hdf5({str(p)!r}, isolate=False)
         except ValueError as exc:
             print("refused:", exc)
-        peak = [line for line in open("/proc/self/status") if line.startswith("VmHWM")][0].split()[1]
-        print("maxrss_kb", peak)
+        print("maxrss_kb", memory("VmHWM") // 1024)
     """)
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          timeout=120, env={**__import__("os").environ,
