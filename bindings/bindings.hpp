@@ -6,4 +6,5 @@ namespace modaluq::python {
 void bind_covariance(pybind11::module_& m);
 void bind_identify(pybind11::module_& m);
 void bind_stabilization(pybind11::module_& m);
+void bind_indicators(pybind11::module_& m);
 }  // namespace modaluq::python

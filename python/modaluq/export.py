@@ -68,6 +68,8 @@ def selected_modes_to_dict(selected) -> dict:
             "order_max": int(selected.order_max[i]), "min_mac": num(selected.min_mac[i]),
             # every pole noise-coupled: may be noise, not a mode (SelectedModes.noise_coupled)
             "noise_coupled": bool(noise_coupled[i]),
+            "mpc": num(selected.mpc[i]), "mpc_std": num(selected.mpc_std[i]),
+            "mpd_deg": num(selected.mpd_deg[i]), "mpd_std_deg": num(selected.mpd_std_deg[i]),
             "mode_shape": shape,
         })
     return {
@@ -125,6 +127,18 @@ def diagram_to_xarray(diagram, selected=None, attrs: dict | None = None):
                      "frequency_spread", "damping_spread", "representative_order",
                      "representative_pole", "n_poles", "order_min", "order_max", "min_mac"):
             pole_vars[f"selected_{name}"] = (("mode",), getattr(sel, name), {})
+        pole_vars["selected_mpc"] = (("mode",), sel.mpc, {"units": "1", "long_name": "modal phase collinearity"})
+        pole_vars["selected_mpc_std"] = (("mode",), sel.mpc_std, {"units": "1"})
+        pole_vars["selected_mpd"] = (("mode",), sel.mpd_deg, {"units": "degree", "long_name": "mean phase deviation"})
+        pole_vars["selected_mpd_std"] = (("mode",), sel.mpd_std_deg, {"units": "degree"})
+        if sel.mode_covariance is not None:
+            pole_vars["selected_covariance"] = (
+                ("mode", "parameter", "parameter_"), sel.mode_covariance,
+                {"long_name": "covariance of [f (Hz), xi, Re shape, Im shape] of the representative pole"})
+            params = ["frequency_hz", "damping_ratio"] + [f"re_{c}" for c in diagram.output_names] + \
+                     [f"im_{c}" for c in diagram.output_names]
+            coords["parameter"] = params
+            coords["parameter_"] = params
         pole_vars["selected_noise_coupled"] = (("mode",), np.asarray(sel.noise_coupled, np.int8),
                                                {"long_name": "every pole of the mode is noise-coupled: it may be "
                                                              "noise, not a mode"})
@@ -175,6 +189,8 @@ def report(diagram, selected, *, stamp: dict | None = None, extra: dict | None =
                                      "may be noise, not a mode",
                     "low_signal_to_noise": "H is within 3 std of its estimation noise: the modes cannot be told "
                                            "from noise",
+                    "mpc": "modal phase collinearity (1: real shape), std to second order",
+                    "mpd_deg": "mean phase deviation, degrees (0: real shape), first-order std",
                     "mode_shape": "normalised: largest-modulus component = 1"}
     out["modes"] = sel["modes"]
     return jsonable(out)

@@ -23,6 +23,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import _core
+from .indicators import mean_phase_deviation, modal_phase_collinearity, shape_covariance
 from .settings import ClusteringSettings
 
 __all__ = ["DropReason", "SelectedModes", "dropped_reason_text", "select_modes"]
@@ -133,6 +134,16 @@ class SelectedModes:
     #: cluster is still selected (a weak physical mode below the noise floor looks the same: the
     #: simulated chain's 1.93 Hz mode on 20,000 samples); tables mark it, exports carry the flag.
     noise_coupled: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
+    #: (n_modes, 2+2l, 2+2l) covariance of [f, ξ, Re shape, Im shape] of each representative pole
+    #: (``Diagram.pole_covariance``), or None without uncertainty
+    mode_covariance: np.ndarray | None = None
+    #: (n_modes,) modal phase collinearity of each shape (1: real, 0: circular) and its σ
+    #: (second order, :mod:`modaluq.indicators`; NaN without ``mode_covariance``)
+    mpc: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    mpc_std: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    #: (n_modes,) mean phase deviation of each shape, degrees (0: real), and its first-order σ
+    mpd_deg: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    mpd_std_deg: np.ndarray = field(default_factory=lambda: np.zeros(0))
     #: the identification's ``Result.low_signal_to_noise``: H is within 3 σ of its own estimation
     #: noise, so any of these modes may be noise (the table's heading says so)
     low_signal_to_noise: bool = False
@@ -150,6 +161,11 @@ class SelectedModes:
         if flags.shape != np.shape(self.frequency_hz):
             flags = np.zeros(np.shape(self.frequency_hz), bool)
         object.__setattr__(self, "noise_coupled", flags)
+        for name in ("mpc", "mpc_std", "mpd_deg", "mpd_std_deg"):  # unknown: NaN per mode
+            values = np.asarray(getattr(self, name), float)
+            if values.shape != np.shape(self.frequency_hz):
+                values = np.full(np.shape(self.frequency_hz), np.nan)
+            object.__setattr__(self, name, values)
 
     @property
     def n_modes(self) -> int:
@@ -174,6 +190,7 @@ class SelectedModes:
             "representative_order": self.representative_order, "n_poles": self.n_poles,
             "order_min": self.order_min, "order_max": self.order_max, "min_mac": self.min_mac,
             "noise_coupled": self.noise_coupled,
+            "mpc": self.mpc, "mpc_std": self.mpc_std, "mpd_deg": self.mpd_deg, "mpd_std_deg": self.mpd_std_deg,
             "low_signal_to_noise": np.full(self.n_modes, bool(self.low_signal_to_noise)),
         }
         for k, name in enumerate(self.output_names):
@@ -334,4 +351,22 @@ def select_modes(diagram, settings: ClusteringSettings | None = None, **kwargs) 
     )
     # the words from the codes and numbers (the core's own words are for its C++ users)
     reasons = tuple(dropped_reason_text(modes, k) for k in range(len(modes.dropped_code)))
-    return dataclasses.replace(modes, dropped_reason=reasons)
+    return dataclasses.replace(modes, dropped_reason=reasons, **_shape_indicators(diagram, modes))
+
+
+def _shape_indicators(diagram, modes: SelectedModes) -> dict:
+    """The representative poles' covariances (from the diagram's identification) and the MPC
+    and MPD of every selected shape with their σ."""
+    covs = None
+    pole_covariance = getattr(diagram, "pole_covariance", None)
+    if modes.n_modes and modes.has_uncertainty and pole_covariance is not None:
+        found = [pole_covariance(int(p)) for p in modes.representative_pole]
+        if all(c is not None for c in found):
+            covs = np.stack(found)
+    mpc, mpd = [], []
+    for k in range(modes.n_modes):
+        shape_cov = None if covs is None else shape_covariance(covs[k])
+        mpc.append(modal_phase_collinearity(modes.mode_shape[:, k], shape_cov))
+        mpd.append(mean_phase_deviation(modes.mode_shape[:, k], shape_cov))
+    return dict(mode_covariance=covs, mpc=np.array([m.value for m in mpc]), mpc_std=np.array([m.std for m in mpc]),
+                mpd_deg=np.array([m.value for m in mpd]), mpd_std_deg=np.array([m.std for m in mpd]))

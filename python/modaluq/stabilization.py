@@ -114,6 +114,9 @@ class Diagram:
     #: :func:`modaluq.select_modes` clusters. ``None`` for a Diagram made otherwise (constructed,
     #: copied or unpickled): make it again with :func:`stabilization_diagram` to select modes.
     _core_diagram: object = field(default=None, init=False, repr=False, compare=False)
+    #: the identification's modes (``Result.modes``) the poles were flattened from, for
+    #: :meth:`pole_covariance`; not copied
+    _modes: object = field(default=None, init=False, repr=False, compare=False)
     #: (n_poles,) correlation of f and ξ of each pole (``Modes.frequency_damping_correlation``; NaN
     #: without uncertainty); empty when unknown
     frequency_damping_correlation: np.ndarray = field(default_factory=lambda: np.zeros(0))
@@ -131,6 +134,24 @@ class Diagram:
     def n_poles(self) -> int:
         return int(self.order.size)
 
+    def pole_covariance(self, pole: int):
+        """The ``(2+2l, 2+2l)`` covariance of ``[f, ξ, Re shape, Im shape]`` of pole ``pole`` (an
+        index into these arrays), from the identification's :class:`~modaluq.Modes`; ``None`` when
+        unknown (no uncertainty, or a Diagram constructed, copied or unpickled)."""
+        modes = self._modes
+        if modes is None or not self.has_uncertainty:
+            return None
+        pole = int(pole)
+        if not 0 <= pole < self.n_poles:
+            raise IndexError(f"pole must be in [0, {self.n_poles}); got {pole}")
+        first = 0  # poles are the modes of every order, in order (poles_of)
+        for m in modes:
+            k = int(np.size(m.frequency_hz))
+            if pole < first + k:
+                return None if m.covariance is None else m.covariance[pole - first]
+            first += k
+        return None
+
     @property
     def core_diagram(self):
         """The core's diagram these arrays were read from, which :func:`modaluq.select_modes`
@@ -141,6 +162,7 @@ class Diagram:
     def __getstate__(self):
         state = dict(self.__dict__)  # the core's objects do not pickle
         state.pop("_core_diagram", None)
+        state.pop("_modes", None)  # pole_covariance is for the diagram of a live identification
         return state
 
     def __len__(self) -> int:
@@ -293,6 +315,7 @@ def stabilization_diagram(result, criteria: StabilityCriteria | None = None, *,
         low_signal_to_noise=bool(getattr(result, "low_signal_to_noise", False)),
     )
     object.__setattr__(diagram, "_core_diagram", d)
+    object.__setattr__(diagram, "_modes", tuple(result.modes))
     return diagram
 
 

@@ -42,7 +42,8 @@ def _script(monkeypatch, name, *args):
 
 def test_every_study_is_smoke_tested():
     scripts = {p.name for p in HIGH_ORDERS.glob("*.py")} | {p.name for p in STUDIES.glob("*.py")}
-    tested = set(HIGH_ORDER_RUNS) | {"prop.py", "earthquake_records.py", "settings_records.py", "selected_sigma_mc.py"}
+    tested = set(HIGH_ORDER_RUNS) | {"prop.py", "earthquake_records.py", "settings_records.py", "selected_sigma_mc.py",
+                                           "indicators_mc.py"}
     assert scripts == tested
 
 
@@ -52,6 +53,13 @@ def test_selected_sigma_mc(capsys):
     assert set(out) == {"input/output", "output-only"}
     assert out["output-only"].shape == (2, 6, 4)
     assert "| mode | f (Hz) | found |" in capsys.readouterr().out
+
+
+@pytest.mark.slow
+def test_indicators_mc(capsys):
+    out = _module("indicators_mc").main(n_records=2, duration=60.0)
+    assert len(out) == 4 and all(a.shape == (2, 6, 8) for a in out.values())
+    assert "same-mode rejected at 5 %" in capsys.readouterr().out
 
 
 def test_settings_records_without_data(capsys, tmp_path):

@@ -6,6 +6,7 @@
 #include "covariance.hpp"
 #include "errors.hpp"
 #include "identify.hpp"
+#include "indicators.hpp"
 #include "layout.hpp"
 #include "modal.hpp"
 #include "realization.hpp"

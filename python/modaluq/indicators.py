@@ -1,0 +1,139 @@
+"""Mode indicators with their uncertainty: MPC, MPD and the MAC between two shapes, each with the
+standard deviation that follows from the shapes' covariance (the core's ``indicators.hpp``,
+docs/uq-math.md §12), and the test "are these two estimates the same mode?" that reads it.
+
+MPC and MAC are 1 at their maximum (a real mode; two estimates of one mode), where a first-order
+σ would be 0 although the estimates scatter: the core propagates them to second order. A shape
+covariance here is the ``(2l, 2l)`` covariance of ``[Re shape; Im shape]``: the lower-right block
+of a mode's ``(2+2l, 2+2l)`` covariance of ``[f, ξ, Re shape, Im shape]``
+(``SelectedModes.mode_covariance``, ``Modes.covariance``); :func:`shape_covariance` takes it out.
+
+>>> import numpy as np
+>>> shape = np.array([1.0, 0.5 + 0.02j, -0.3])
+>>> round(modal_phase_collinearity(shape).value, 4)
+0.999
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import _core
+
+__all__ = ["IndicatorValue", "MacTest", "mac_test", "mean_phase_deviation", "modal_phase_collinearity",
+           "shape_covariance"]
+
+
+@dataclass(frozen=True)
+class IndicatorValue:
+    """An indicator of an estimated shape and its standard deviation (NaN without a covariance)."""
+
+    value: float
+    std: float
+
+
+@dataclass(frozen=True)
+class MacTest:
+    """The MAC between two independently estimated shapes, its σ, and the test of "same mode".
+
+    Under "same mode" (the true shapes collinear), ``1 - mac`` is a quadratic form of the
+    estimation errors, with mean ``loss_mean`` and std ``loss_std`` (second order); ``p_value`` is
+    its upper tail, from a scaled χ² with those two moments (Satterthwaite). A small ``p_value``
+    says the shapes differ by more than their σ explain.
+    """
+
+    mac: float
+    std: float              #: σ of the MAC estimate (second order)
+    loss_mean: float        #: E[1 - MAC] if both estimate the same mode
+    loss_std: float         #: its σ
+    p_value: float          #: P(1 - MAC at least this large | same mode); NaN without covariances
+
+    def same_mode(self, alpha: float = 0.01) -> bool:
+        """True unless the test rejects "same mode" at level ``alpha`` (a MAC without σ: MAC ≥ 0.9)."""
+        if not np.isfinite(self.p_value):
+            return bool(self.mac >= 0.9)
+        return bool(self.p_value >= alpha)
+
+
+def shape_covariance(mode_covariance) -> np.ndarray:
+    """The ``(2l, 2l)`` block of ``[Re shape; Im shape]`` of a mode's ``(2+2l, 2+2l)`` covariance
+    of ``[f, ξ, Re shape, Im shape]``."""
+    c = np.asarray(mode_covariance, dtype=float)
+    if c.ndim != 2 or c.shape[0] != c.shape[1] or c.shape[0] < 4 or c.shape[0] % 2:
+        raise ValueError(f"mode_covariance must be a (2+2l, 2+2l) covariance of [f, xi, Re shape, Im shape]; "
+                         f"got shape {c.shape}")
+    return c[2:, 2:]
+
+
+def _shape(name: str, shape) -> np.ndarray:
+    s = np.asarray(shape)
+    if s.ndim != 1 or s.size == 0:
+        raise ValueError(f"{name} must be a 1-D mode shape (one entry per channel); got shape {s.shape}")
+    if not np.all(np.isfinite(s)):
+        raise ValueError(f"{name} must be finite")
+    if not np.any(s != 0):
+        raise ValueError(f"{name} must not be zero")
+    return s.astype(complex)
+
+
+def _cov(name: str, cov, n: int) -> np.ndarray:
+    try:
+        c = np.asarray(cov, dtype=float)
+    except (TypeError, ValueError) as e:
+        raise TypeError(f"{name} must be a real covariance matrix; got {type(cov).__name__}") from e
+    if not np.all(np.isfinite(c)):
+        raise ValueError(f"{name} must be finite")
+    if c.shape != (2 * n, 2 * n):
+        raise ValueError(f"{name} must be the ({2 * n}, {2 * n}) covariance of [Re shape; Im shape] of a "
+                         f"{n}-component shape; got shape {c.shape}")
+    return c
+
+
+def modal_phase_collinearity(shape, cov=None) -> IndicatorValue:
+    """MPC of ``shape`` (1: real, 0: circular), with its σ from ``cov`` (second order)."""
+    s = _shape("shape", shape)
+    if cov is None:
+        return IndicatorValue(float(_core.modal_phase_collinearity(s)), float("nan"))
+    r = _core.modal_phase_collinearity_statistics(s, _cov("cov", cov, s.size))
+    return IndicatorValue(float(r.value), float(r.std))
+
+
+def mean_phase_deviation(shape, cov=None) -> IndicatorValue:
+    """MPD of ``shape`` in degrees (0: real, up to 90), with its first-order σ from ``cov``.
+
+    The deviations are absolute angles: for a nearly real shape the estimate is folded at 0 and
+    its σ (of the signed angles) describes the spread of those, not a symmetric interval."""
+    s = _shape("shape", shape)
+    r = _core.mean_phase_deviation(s, np.zeros((0, 0)) if cov is None else _cov("cov", cov, s.size))
+    return IndicatorValue(float(r.value), float(r.std))
+
+
+def mac_test(shape_a, shape_b, cov_a=None, cov_b=None) -> MacTest:
+    """MAC of two independently estimated shapes (two records, two setups, or an estimate against
+    a fixed reference: leave that one's covariance ``None``) with its σ and the "same mode" test.
+
+    Both covariances ``None``: the MAC alone (σ and p-value NaN)."""
+    a, b = _shape("shape_a", shape_a), _shape("shape_b", shape_b)
+    if a.size != b.size:
+        raise ValueError(f"shape_a and shape_b must have as many components; got {a.size} and {b.size}")
+    if cov_a is None and cov_b is None:
+        nan = float("nan")
+        return MacTest(float(_core.modal_assurance(a, b)), nan, nan, nan, nan)
+    zero = np.zeros((2 * a.size, 2 * a.size))
+    ca = zero if cov_a is None else _cov("cov_a", cov_a, a.size)
+    cb = zero if cov_b is None else _cov("cov_b", cov_b, b.size)
+    r = _core.modal_assurance_statistics(a, ca, b, cb)
+    return MacTest(float(r.value), float(r.std), float(r.loss_at_maximum_mean), float(r.loss_at_maximum_std),
+                   _loss_p_value(1.0 - float(r.value), float(r.loss_at_maximum_mean), float(r.loss_at_maximum_std)))
+
+
+def _loss_p_value(loss: float, mean: float, std: float) -> float:
+    """Upper tail of a loss under the maximum: a χ² scaled to the loss's mean and std."""
+    if not (mean > 0 and std > 0):
+        return float("nan")
+    from scipy.stats import chi2  # lazy: import modaluq stays light
+
+    scale, dof = std * std / (2 * mean), 2 * mean * mean / (std * std)
+    return float(chi2.sf(max(loss, 0.0) / scale, dof))

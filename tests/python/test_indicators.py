@@ -1,0 +1,158 @@
+"""modaluq.indicators (the core's indicators.hpp): MPC, MPD and MAC with their σ.
+
+Values against an independent NumPy writing of each definition (MPC from the eigenvalues of the
+2x2 real/imaginary scatter, MPD from the SVD as in Reynders et al. 2012, MAC from np.vdot); σ
+against the second-order moments computed here from numerical derivatives; the "same mode" test's
+false-rejection rate against Gaussian draws of known covariance; the selected modes carry them.
+"""
+
+import pickle
+
+import numpy as np
+import pytest
+
+import modaluq
+from modaluq.indicators import mac_test, mean_phase_deviation, modal_phase_collinearity, shape_covariance
+
+
+def mpc_numpy(phi):
+    xy = np.stack([phi.real, phi.imag])
+    ev = np.linalg.eigvalsh(xy @ xy.T)
+    return ((ev[1] - ev[0]) / (ev[1] + ev[0])) ** 2
+
+
+def mpd_numpy(phi):
+    _, _, vt = np.linalg.svd(np.stack([phi.real, phi.imag], axis=1), full_matrices=False)
+    v12, v22 = vt[1, 0], vt[1, 1]  # second right singular vector (rows of vt)
+    w = np.abs(phi)
+    dev = np.arccos(np.clip(np.abs(phi.real * v22 - phi.imag * v12) / (np.hypot(v12, v22) * w), -1, 1))
+    return np.degrees(np.sum(w * dev) / np.sum(w))
+
+
+def mac_numpy(a, b):
+    return abs(np.vdot(a, b)) ** 2 / (np.vdot(a, a).real * np.vdot(b, b).real)
+
+
+def second_order_numpy(q, z, cov, h=1e-5):
+    """value, gradient and Hessian of q(z) by central differences; the moments of indicators.hpp."""
+    n = z.size
+    eye = np.eye(n) * h
+    g = np.array([(q(z + eye[i]) - q(z - eye[i])) / (2 * h) for i in range(n)])
+    hess = np.empty((n, n))
+    for i in range(n):
+        for j in range(n):
+            hess[i, j] = (q(z + eye[i] + eye[j]) - q(z + eye[i] - eye[j]) - q(z - eye[i] + eye[j])
+                          + q(z - eye[i] - eye[j])) / (4 * h * h)
+    hs = hess @ cov
+    tr2 = np.trace(hs @ hs)
+    return np.sqrt(max(g @ cov @ g - tr2, 0) + 0.5 * tr2), -0.5 * np.trace(hs), np.sqrt(0.5 * tr2)
+
+
+def realify(phi):
+    return np.concatenate([phi.real, phi.imag])
+
+
+def complexify(z):
+    n = z.size // 2
+    return z[:n] + 1j * z[n:]
+
+
+@pytest.fixture
+def shapes():
+    rng = np.random.default_rng(3)
+    a = rng.normal(size=5) + 0.3j * rng.normal(size=5)
+    b = a + 0.2 * (rng.normal(size=5) + 1j * rng.normal(size=5))
+    f = 0.05 * np.tril(rng.normal(size=(10, 10)))
+    return a, b, f @ f.T
+
+
+def test_values_equal_independent_definitions(shapes):
+    a, b, _ = shapes
+    assert modal_phase_collinearity(a).value == pytest.approx(mpc_numpy(a), rel=1e-12)
+    assert mean_phase_deviation(a).value == pytest.approx(mpd_numpy(a), rel=1e-10)
+    assert mac_test(a, b).mac == pytest.approx(mac_numpy(a, b), rel=1e-12)
+    assert modal_phase_collinearity(np.array([1, -2, 0.5])).value == pytest.approx(1.0, abs=1e-15)
+
+
+def test_std_equals_second_order_moments_from_numerical_derivatives(shapes):
+    a, b, cov = shapes
+    r = modal_phase_collinearity(a, cov)
+    std, _, _ = second_order_numpy(lambda z: mpc_numpy(complexify(z)), realify(a), cov)
+    assert r.std == pytest.approx(std, rel=1e-4)
+    joint = np.zeros((20, 20))
+    joint[:10, :10] = cov
+    joint[10:, 10:] = 2 * cov
+    t = mac_test(a, b, cov, 2 * cov)
+    std, loss_mean, loss_std = second_order_numpy(
+        lambda z: mac_numpy(complexify(z[:10]), complexify(z[10:])), np.concatenate([realify(a), realify(b)]), joint)
+    assert t.std == pytest.approx(std, rel=1e-4)
+    assert t.loss_mean == pytest.approx(loss_mean, rel=1e-4)
+    assert t.loss_std == pytest.approx(loss_std, rel=1e-4)
+
+
+def test_same_mode_test_rejects_at_its_level_under_the_null(shapes):
+    # two estimates of one (complex) shape with known covariances: the p-value is ~uniform
+    a, _, cov = shapes
+    rng = np.random.default_rng(11)
+    chol = np.linalg.cholesky(cov + 1e-14 * np.eye(10))
+    p = np.array([mac_test(a + complexify(chol @ rng.normal(size=10)), a + complexify(chol @ rng.normal(size=10)),
+                           cov, cov).p_value for _ in range(2000)])
+    assert 0.03 <= np.mean(p < 0.05) <= 0.07
+    assert 0.07 <= np.mean(p < 0.10) <= 0.13
+    # a different mode (orthogonal-ish) is rejected
+    other = np.roll(a, 2) * np.array([1, -1, 1, -1, 1])
+    assert not mac_test(a, other, cov, cov).same_mode()
+
+
+def test_refusals_name_the_parameter():
+    phi = np.array([1.0, 2.0, 3.0])
+    with pytest.raises(ValueError, match="shape"):
+        modal_phase_collinearity(np.zeros(3))
+    with pytest.raises(ValueError, match="shape"):
+        modal_phase_collinearity(np.ones((3, 2)))
+    with pytest.raises(ValueError, match="cov"):
+        modal_phase_collinearity(phi, np.eye(3))
+    with pytest.raises(ValueError, match="cov_b"):
+        mac_test(phi, phi, np.eye(6), np.full((6, 6), np.nan))
+    with pytest.raises(ValueError, match="shape_a and shape_b"):
+        mac_test(phi, phi[:2])
+    with pytest.raises(ValueError, match="mode_covariance"):
+        shape_covariance(np.eye(5))
+
+
+def test_selected_modes_carry_covariance_and_indicators():
+    sim = modaluq.simulate(20000, seed=4)
+    result = modaluq.identify(sim.y, sim.u, fs=sim.fs, block_rows=20, orders=range(2, 31, 2))
+    diagram = result.stabilization_diagram()
+    sel = diagram.select_modes()
+    assert sel.n_modes >= 5
+    l = sim.y.shape[1]
+    assert sel.mode_covariance.shape == (sel.n_modes, 2 + 2 * l, 2 + 2 * l)
+    for k, pole in enumerate(sel.representative_pole):
+        order = sel.representative_order[k]
+        m = next(m for m in result.modes if m.order == order)
+        i = int(np.flatnonzero(m.frequency_hz == sel.frequency_hz[k])[0])
+        np.testing.assert_array_equal(sel.mode_covariance[k], m.covariance[i])
+        np.testing.assert_array_equal(diagram.pole_covariance(pole), m.covariance[i])
+        # the shape std on the diagonal
+        np.testing.assert_allclose(np.sqrt(np.diag(sel.mode_covariance[k])[2:2 + l]), sel.mode_shape_std_real[:, k],
+                                   rtol=1e-12)
+        r = modal_phase_collinearity(sel.mode_shape[:, k], shape_covariance(m.covariance[i]))
+        assert (sel.mpc[k], sel.mpc_std[k]) == (r.value, r.std)
+    assert np.all(sel.mpc > 0.99) and np.all(np.isfinite(sel.mpc_std)) and np.all(sel.mpd_deg < 5)
+    frame = sel.to_dataframe()
+    np.testing.assert_array_equal(frame["mpc"].to_numpy(), sel.mpc)
+    assert sel.to_dict()["modes"][0]["mpd_deg"] == pytest.approx(sel.mpd_deg[0])
+    # an unpickled diagram has no identification behind it: no covariance, NaN indicators' σ
+    again = pickle.loads(pickle.dumps(diagram))
+    assert again.pole_covariance(0) is None
+    with pytest.raises(IndexError, match="pole"):
+        diagram.pole_covariance(diagram.n_poles)
+
+
+def test_without_uncertainty_the_indicators_have_no_std():
+    sim = modaluq.simulate(5000, seed=5)
+    sel = modaluq.identify(sim.y, fs=sim.fs, block_rows=20, orders=range(2, 25, 2),
+                           uncertainty=False).select_modes()
+    assert sel.mode_covariance is None
+    assert np.all(np.isfinite(sel.mpc)) and np.all(np.isnan(sel.mpc_std))
