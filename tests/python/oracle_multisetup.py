@@ -153,8 +153,9 @@ class Campaign:
     in the global reference order).  Setup 0 is the basis setup (12.2).
     """
 
-    def __init__(self, setups, p, n_max, uncertainty=True):
+    def __init__(self, setups, p, n_max, uncertainty=True, pool_references=False):
         self.p = int(p)
+        self.pool = bool(pool_references)
         self.n_max = int(n_max)
         self.r = len(setups[0]["references"])
         self.setups = []
@@ -172,13 +173,20 @@ class Campaign:
                                 "rows_mov": rows_mov, "n_mov": len(mov)})
             self.dofs += [(j, int(c)) for c in mov]
         self.l_g = len(self.dofs)
-        # global rows: block row i, global channel g -> i*l_g + g
+        # (12.11) with pool_references, the reference rows of setups j >= 1 (normalised) are
+        # extra rows of each block row, after the l_g DOFs: they enter A, not C.
+        self.l_A = self.l_g + (len(self.setups) - 1) * self.r * self.pool
+        # global rows: block row i, column g -> i*l_A + g
         off = self.r
         for st in self.setups:
             g = off + np.arange(st["n_mov"])
-            st["grows_mov"] = (np.arange(self.p)[:, None] * self.l_g + g[None, :]).ravel()
+            st["grows_mov"] = (np.arange(self.p)[:, None] * self.l_A + g[None, :]).ravel()
             off += st["n_mov"]
-        self.grows_ref = (np.arange(self.p)[:, None] * self.l_g + np.arange(self.r)[None, :]).ravel()
+        for st in self.setups[1:]:
+            g = off + np.arange(self.r)
+            st["grows_refx"] = (np.arange(self.p)[:, None] * self.l_A + g[None, :]).ravel() if self.pool else None
+            off += self.r * self.pool
+        self.grows_ref = (np.arange(self.p)[:, None] * self.l_A + np.arange(self.r)[None, :]).ravel()
         limit = min(self.p * self.r, (self.p - 1) * self.l_g,
                     *[st["Gamma"].shape[1] for st in self.setups])
         if self.n_max > limit:
@@ -194,12 +202,14 @@ def merge_gamma(camp, n):
     """Global Γ_g at order n (12.2)-(12.4): basis B = Γ^(0)_ref, T_j = (Γ^(j)_ref)^† B,
     moving rows Γ^(j)_mov T_j, references once (from the basis setup)."""
     B = camp.setups[0]["Gamma"][camp.setups[0]["rows_ref"], :n]
-    G = np.zeros((camp.p * camp.l_g, n))
+    G = np.zeros((camp.p * camp.l_A, n))
     G[camp.grows_ref] = B
-    for st in camp.setups:
+    for j, st in enumerate(camp.setups):
         X = st["Gamma"][st["rows_ref"], :n]
         T = np.linalg.lstsq(X, B, rcond=None)[0]
         G[st["grows_mov"]] = st["Gamma"][st["rows_mov"], :n] @ T
+        if camp.pool and j > 0:
+            G[st["grows_refx"]] = X @ T
     return G
 
 
@@ -218,7 +228,7 @@ def merge_gamma_perturbation(camp, n):
     for j, st in enumerate(camp.setups):
         dG = st["dGamma"][:, :n, :]
         nb = dG.shape[2]
-        D = np.zeros((camp.p * camp.l_g, n, nb))
+        D = np.zeros((camp.p * camp.l_A, n, nb))
         dX = dG[st["rows_ref"]]
         if j == 0:
             # basis setup: dB enters the reference rows and every T_i (12.6); T_0 ≡ I.
@@ -228,6 +238,9 @@ def merge_gamma_perturbation(camp, n):
                 P = pre[i]
                 XpGm = P["Gm"] @ P["W"] @ P["X"].T                  # Γ^(i)_mov X_i^†
                 D[camp.setups[i]["grows_mov"]] += np.einsum("ar,rnk->ank", XpGm, dX)
+                if camp.pool:                                       # d(X_i T_i) = X_i X_i^† dB
+                    XXp = P["X"] @ P["W"] @ P["X"].T
+                    D[camp.setups[i]["grows_refx"]] += np.einsum("ar,rnk->ank", XXp, dX)
         else:
             P = pre[j]
             # dT_j = −X^† dX T + W dXᵀ E (12.5), the second term the least-squares residual's
@@ -235,6 +248,9 @@ def merge_gamma_perturbation(camp, n):
                   + np.einsum("nm,rmk,rl->nlk", P["W"], dX, P["E"]))
             D[st["grows_mov"]] = (np.einsum("amk,mn->ank", dG[st["rows_mov"]], P["T"])
                                   + np.einsum("am,mnk->ank", P["Gm"], dT))
+            if camp.pool:                                           # d(X_j T_j)
+                D[st["grows_refx"]] = (np.einsum("amk,mn->ank", dX, P["T"])
+                                       + np.einsum("am,mnk->ank", P["X"], dT))
         out.append(D)
     return out
 
@@ -242,18 +258,20 @@ def merge_gamma_perturbation(camp, n):
 # --------------------------------------------------------------------------------------
 # (A, C) and the modes, per block (uq-math §6-§7), for any Γ (here the global one)
 # --------------------------------------------------------------------------------------
-def system_perturbation(Gam, dGam, l):
-    """A, C (2.6)-(2.7) and dA, dC per block from (6.1)-(6.2), residual term included."""
+def system_perturbation(Gam, dGam, l, l_out=None):
+    """A, C (2.6)-(2.7) and dA, dC per block from (6.1)-(6.2), residual term included.
+    Block rows have l rows; C is the first ``l_out`` (default l) rows of the first one."""
+    l_out = l if l_out is None else l_out
     up, dw = Gam[:-l], Gam[l:]
     A = np.linalg.lstsq(up, dw, rcond=None)[0]
-    C = Gam[:l].copy()
+    C = Gam[:l_out].copy()
     W = np.linalg.inv(up.T @ up)
     E = dw - up @ A
     dup, ddw = dGam[:-l], dGam[l:]
     rhs = (np.einsum("an,amk->nmk", up, ddw) - np.einsum("an,amk,ml->nlk", up, dup, A)
            + np.einsum("amk,al->mlk", dup, E))
     dA = np.einsum("nm,mlk->nlk", W, rhs)
-    return A, C, dA, dGam[:l]
+    return A, C, dA, dGam[:l_out]
 
 
 def modal_perturbation(A, C, dA, dC, fs, ref_index=None):
@@ -311,25 +329,30 @@ def prepare_setups(records, p, q, n_blocks, references):
     return out
 
 
-def identify_modular(setups, *, fs, p, orders, ref_index=None, uncertainty=True):
+def identify_modular(setups, *, fs, p, orders, ref_index=None, uncertainty=True,
+                     pool_references=False):
     """Modular multi-setup identification at every order (12.2)-(12.7).
 
     ``setups`` as for :class:`Campaign` (e.g. from :func:`prepare_setups`).  Returns
     ({order: result}, campaign).  Each result has frequency_hz, damping_ratio, mode_shape
     (l_g × nm, normalised to 1 at ref_index, the nominal largest component by default),
     eigenvalues, ref_index and, with ``uncertainty``, factor (nm × (2+2l_g) × Σn_b,j),
-    covariance, frequency_std, damping_std, mode_shape_std_real/imag."""
+    covariance, frequency_std, damping_std, mode_shape_std_real/imag.
+
+    ``pool_references``: the normalised reference rows X_j T_j of every setup j ≥ 1 enter the
+    estimate of A as extra rows (12.11); C keeps the references once."""
     orders = [int(o) for o in np.atleast_1d(orders)]
-    camp = Campaign(setups, p, max(orders), uncertainty=uncertainty)
+    camp = Campaign(setups, p, max(orders), uncertainty=uncertainty, pool_references=pool_references)
     out = {}
     for n in orders:
         Gg = merge_gamma(camp, n)
         if uncertainty:
             dGg = np.concatenate(merge_gamma_perturbation(camp, n), axis=2)
-            A, C, dA, dC = system_perturbation(Gg, dGg, camp.l_g)
+            A, C, dA, dC = system_perturbation(Gg, dGg, camp.l_A, camp.l_g)
             md, fac = modal_perturbation(A, C, dA, dC, fs, ref_index=ref_index)
         else:
-            A, C = oracle.system_matrices(Gg, camp.l_g)
+            A = oracle.system_matrices(Gg, camp.l_A)[0]
+            C = Gg[:camp.l_g].copy()
             md = oracle.modes(A, C, fs, ref_index=ref_index)
         res = {k: md[k] for k in ("frequency_hz", "damping_ratio", "mode_shape", "eigenvalues",
                                   "ref_index")}

@@ -97,15 +97,17 @@ def test_dGamma_equals_the_explicit_J_Gamma_H_and_fd(case):
 
 
 # ------------------------------------------------------------------------ the merge
-def test_merge_perturbation_equals_fd_for_every_setup(case):
+@pytest.mark.parametrize("pool", [False, True])
+def test_merge_perturbation_equals_fd_for_every_setup(case, pool):
     _, setups, _ = case
-    camp = om.Campaign(setups, P, ORDER)
+    camp = om.Campaign(setups, P, ORDER, pool_references=pool)
     D = om.merge_gamma_perturbation(camp, ORDER)
 
     for j, st in enumerate(setups):
         def merged(hvec, j=j):
             H = hvec.reshape(st["H"].shape, order="F")
-            return om.merge_gamma(om.Campaign(_with_H(setups, j, H), P, ORDER, uncertainty=False), ORDER)
+            return om.merge_gamma(om.Campaign(_with_H(setups, j, H), P, ORDER, uncertainty=False,
+                                              pool_references=pool), ORDER)
         fd = np.stack([_fd(merged, oracle.vec(st["H"]), st["T_H"][:, k]) for k in range(NB)], axis=2)
         assert _rel(D[j], fd) < TOL, j
 
@@ -147,10 +149,11 @@ def test_system_and_modal_stage_equal_fd_and_the_explicit_jacobians(case):
         assert _rel(fac[i], J @ J_AC @ dvec) < 1e-8, i
 
 
-def test_end_to_end_from_each_setups_covariances_equals_fd(case):
+@pytest.mark.parametrize("pool", [False, True])
+def test_end_to_end_from_each_setups_covariances_equals_fd(case, pool):
     """θ = [f, ξ, Re ϕ̃, Im ϕ̃] of every mode from the R's of each setup, along T_R."""
     c, setups, io = case
-    res, camp = om.identify_modular(setups, fs=c.fs, p=P, orders=[ORDER])
+    res, camp = om.identify_modular(setups, fs=c.fs, p=P, orders=[ORDER], pool_references=pool)
     r0 = res[ORDER]
     k = r0["ref_index"]
     covs = [om.setup_covariances(s.y, s.u if io else None, P, P, NB, s.references) for s in c.setups]
@@ -162,7 +165,8 @@ def test_end_to_end_from_each_setups_covariances_equals_fd(case):
         def theta(rvec, j=j, a=a, b=b, pm=pm):
             R = oracle._unstack_r(rvec, a, b, pm)
             st = _with_H(setups, j, oracle.subspace_matrix(*R))
-            out, _ = om.identify_modular(st, fs=c.fs, p=P, orders=[ORDER], ref_index=k, uncertainty=False)
+            out, _ = om.identify_modular(st, fs=c.fs, p=P, orders=[ORDER], ref_index=k, uncertainty=False,
+                                         pool_references=pool)
             o = out[ORDER]
             assert len(o["frequency_hz"]) == len(k)
             return np.vstack([o["frequency_hz"], o["damping_ratio"], o["mode_shape"].real,
@@ -206,9 +210,10 @@ def test_merge_is_invariant_to_each_setups_units(case):
         assert np.allclose(res[ORDER][key], res2[ORDER][key], rtol=1e-8, atol=1e-12), key
 
 
-def test_merge_recovers_the_true_modes(case):
+@pytest.mark.parametrize("pool", [False, True])
+def test_merge_recovers_the_true_modes(case, pool):
     c, setups, _ = case
-    res, camp = om.identify_modular(setups, fs=c.fs, p=P, orders=[ORDER])
+    res, camp = om.identify_modular(setups, fs=c.fs, p=P, orders=[ORDER], pool_references=pool)
     r = res[ORDER]
     assert np.allclose(r["frequency_hz"], c.frequency_hz, rtol=0.02)
     names = [c.setups[j].channels[ch] for j, ch in camp.dofs]

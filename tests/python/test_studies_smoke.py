@@ -42,7 +42,8 @@ def _script(monkeypatch, name, *args):
 
 def test_every_study_is_smoke_tested():
     scripts = {p.name for p in HIGH_ORDERS.glob("*.py")} | {p.name for p in STUDIES.glob("*.py")}
-    tested = set(HIGH_ORDER_RUNS) | {"prop.py", "earthquake_records.py", "settings_records.py", "selected_sigma_mc.py"}
+    tested = set(HIGH_ORDER_RUNS) | {"prop.py", "earthquake_records.py", "settings_records.py", "selected_sigma_mc.py",
+                                    "multisetup_mc.py"}
     assert scripts == tested
 
 
@@ -52,6 +53,13 @@ def test_selected_sigma_mc(capsys):
     assert set(out) == {"input/output", "output-only"}
     assert out["output-only"].shape == (2, 6, 4)
     assert "| mode | f (Hz) | found |" in capsys.readouterr().out
+
+
+@pytest.mark.slow
+def test_multisetup_mc(capsys):
+    out = _module("multisetup_mc").main(n=2, configs=["output-only"])
+    assert set(out) == {"output-only"} and len(out["output-only"]) == 2
+    assert "| mode | f (Hz) | method |" in capsys.readouterr().out
 
 
 def test_settings_records_without_data(capsys, tmp_path):
