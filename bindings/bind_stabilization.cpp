@@ -39,6 +39,8 @@ void modaluq::python::bind_stabilization(py::module_& m) {
         .def_readwrite("max_damping_change_with_std", &StabilityCriteria::max_damping_change_with_std)
         .def_readwrite("match_window", &StabilityCriteria::match_window)
         .def_readwrite("frequency_range", &StabilityCriteria::frequency_range)
+        .def_readwrite("min_mpc", &StabilityCriteria::min_mpc)
+        .def_readwrite("max_mpd_deg", &StabilityCriteria::max_mpd_deg)
         .def("validate", &StabilityCriteria::validate);
 
     py::class_<Poles>(m, "Poles")
@@ -70,6 +72,8 @@ void modaluq::python::bind_stabilization(py::module_& m) {
         .def_readwrite("damping_change", &Diagram::damping_change)
         .def_readwrite("mac", &Diagram::mac)
         .def_readwrite("frequency_change_std", &Diagram::frequency_change_std)
+        .def_readwrite("mpc", &Diagram::mpc)
+        .def_readwrite("mpd_deg", &Diagram::mpd_deg)
         .def_readwrite("criteria", &Diagram::criteria);
     m.def("stabilization_diagram", py::overload_cast<Poles, const StabilityCriteria&>(&stabilization_diagram),
           py::arg("poles"), py::arg("criteria"), py::call_guard<py::gil_scoped_release>());

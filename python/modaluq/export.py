@@ -117,6 +117,9 @@ def diagram_to_xarray(diagram, selected=None, attrs: dict | None = None):
         "mode_shape_std_real": (("channel", "pole"), diagram.mode_shape_std_real, {}),
         "mode_shape_std_imag": (("channel", "pole"), diagram.mode_shape_std_imag, {}),
     }
+    if np.size(diagram.mpc) == diagram.n_poles:
+        pole_vars["mpc"] = (("pole",), diagram.mpc, {"units": "1", "long_name": "modal phase collinearity"})
+        pole_vars["mpd"] = (("pole",), diagram.mpd_deg, {"units": "degree", "long_name": "mean phase deviation"})
     coords = {"pole": np.arange(diagram.n_poles), "channel": list(diagram.output_names)}
     if selected is not None:
         sel = selected

@@ -268,6 +268,11 @@ class StabilityCriteria:
     - ``damping_ratio < min_damping_ratio`` (default 0: negative damping is unstable, not a
       structural mode) or ``damping_ratio > max_damping_ratio`` (default 0.20 = 20 %: lightly
       damped structures rarely exceed a few percent; heavily damped poles are usually noise);
+    - optionally (off by default), ``MPC < min_mpc`` or ``MPD > max_mpd_deg`` (the modal phase
+      collinearity and mean phase deviation of the pole's shape, :mod:`modaluq.indicators`):
+      peers filter spurious poles by their complexity; a physical mode of a structure with
+      non-proportional damping (dampers, soil, aerodynamics) is complex too, so modaluq leaves
+      the decision to the σ tests unless asked (e.g. ``min_mpc=0.8`` for a building);
     - ``frequency_std / frequency_hz > max_frequency_cov`` (default 0.05 = 5 %, a loose backstop:
       whether a column's σ is too large is judged by the selection against the bandwidth f ξ
       of its peak, :class:`ClusteringSettings`. The earlier 2 % cut the columns of well-damped
@@ -318,6 +323,10 @@ class StabilityCriteria:
         Backstop on the relative damping change when the σ test is used (fraction).
     match_window : float
         Largest relative frequency distance to a pole of the previous order that can be its match.
+    min_mpc : float or None
+        Smallest modal phase collinearity of a pole's shape (0..1), or None (default) for no test.
+    max_mpd_deg : float or None
+        Largest mean phase deviation of a pole's shape (degrees, 0..90), or None (default) for no test.
     """
 
     max_frequency_change: float = _CRITERIA["max_frequency_change"]
@@ -330,6 +339,8 @@ class StabilityCriteria:
     damping_std_factor: float | None = _CRITERIA["damping_std_factor"]
     max_damping_change_with_std: float = _CRITERIA["max_damping_change_with_std"]
     match_window: float = _CRITERIA["match_window"]
+    min_mpc: float | None = _CRITERIA["min_mpc"]
+    max_mpd_deg: float | None = _CRITERIA["max_mpd_deg"]
 
     def __post_init__(self):
         check_real("max_frequency_change", self.max_frequency_change, low=0)
@@ -340,6 +351,8 @@ class StabilityCriteria:
         check_real("damping_std_factor", self.damping_std_factor, low=0, low_open=True, allow_none=True)
         check_real("max_damping_change_with_std", self.max_damping_change_with_std, low=0)
         check_real("match_window", self.match_window, low=0, low_open=True)
+        check_real("min_mpc", self.min_mpc, low=0, high=1, allow_none=True)
+        check_real("max_mpd_deg", self.max_mpd_deg, low=0, high=90, allow_none=True)
         lo = check_real("min_damping_ratio", self.min_damping_ratio, low=-1, high=1)
         hi = check_real("max_damping_ratio", self.max_damping_ratio, low=-1, high=1)
         if hi <= lo:

@@ -129,6 +129,11 @@ class Diagram:
     #: the identification's ``Result.low_signal_to_noise``: H is at the level of its own estimation
     #: noise, the modes cannot be told from noise (the tables of the selected modes say so)
     low_signal_to_noise: bool = False
+    #: (n_poles,) modal phase collinearity of each pole's shape (1: real) and its mean phase
+    #: deviation, degrees (:mod:`modaluq.indicators`; ``StabilityCriteria.min_mpc``/``max_mpd_deg``
+    #: can reject poles by them); empty when unknown (a Diagram constructed by hand)
+    mpc: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    mpd_deg: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
     @property
     def n_poles(self) -> int:
@@ -305,7 +310,7 @@ def stabilization_diagram(result, criteria: StabilityCriteria | None = None, *,
         reason=np.array(d.reason, dtype=str) if n_poles else np.array([], dtype=str),
         matched_pole=np.asarray(d.matched_pole, np.int64),
         frequency_change=d.frequency_change, damping_change=d.damping_change, mac=d.mac,
-        frequency_change_std=d.frequency_change_std,
+        frequency_change_std=d.frequency_change_std, mpc=d.mpc, mpd_deg=d.mpd_deg,
         close_singular_values=np.asarray(p.close_singular_values, bool),
         noise_coupled=np.asarray(p.noise_coupled, bool), orders=tuple(int(o) for o in p.orders),
         fs=float(result.fs), output_names=names, criteria=criteria, has_uncertainty=has_std,

@@ -92,6 +92,29 @@ TEST_CASE("stabilization: sigma tests, a band, and no uncertainty") {
         CHECK(d.reason[0] == "outside the band 5-15 Hz");
         CHECK(d.status[1] == PoleStatus::unstable);
     }
+    SUBCASE("MPC and MPD of every pole; their criteria are off by default and reject complex shapes when set") {
+        auto p = make_poles({{2, {{3.0}, {10.0}}}});
+        p.mode_shape(1, 1) = std::complex<double>(0.0, 1.0);  // pole at 10 Hz: shape {1, i, -0.3}
+        auto d = modaluq::stabilization_diagram(p);
+        CHECK(d.mpc(0) == doctest::Approx(1.0));
+        CHECK(d.mpd_deg(0) == doctest::Approx(0.0).scale(1.0));
+        CHECK(d.mpc(1) == doctest::Approx(modaluq::modal_phase_collinearity(Eigen::VectorXcd(p.mode_shape.col(1)))));
+        CHECK(d.mpc(1) < 0.5);
+        CHECK(d.status[1] == PoleStatus::unstable);  // kept: no MPC test by default
+        modaluq::StabilityCriteria c;
+        c.min_mpc = 0.8;
+        d = modaluq::stabilization_diagram(p, c);
+        CHECK(d.status[0] == PoleStatus::unstable);
+        CHECK(d.status[1] == PoleStatus::rejected);
+        CHECK(d.reason[1].rfind("MPC ", 0) == 0);
+        c = {};
+        c.max_mpd_deg = 10.0;
+        d = modaluq::stabilization_diagram(p, c);
+        CHECK(d.status[1] == PoleStatus::rejected);
+        CHECK(d.reason[1].find("deg > 10 deg") != std::string::npos);
+        c.max_mpd_deg = 91.0;
+        CHECK_THROWS_WITH_AS(c.validate(), doctest::Contains("max_mpd_deg"), modaluq::invalid_argument);
+    }
     SUBCASE("without uncertainty the sigma tests are skipped") {
         const auto p = make_poles({{2, {{10.0}}}, {4, {{10.01}}}}, /*with_std=*/false);
         const auto d = modaluq::stabilization_diagram(p);

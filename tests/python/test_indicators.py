@@ -156,3 +156,24 @@ def test_without_uncertainty_the_indicators_have_no_std():
                            uncertainty=False).select_modes()
     assert sel.mode_covariance is None
     assert np.all(np.isfinite(sel.mpc)) and np.all(np.isnan(sel.mpc_std))
+
+
+def test_diagram_mpc_mpd_and_their_optional_criteria():
+    sim = modaluq.simulate(10000, seed=6)
+    result = modaluq.identify(sim.y, fs=sim.fs, block_rows=20, orders=range(2, 41, 2))
+    d = result.stabilization_diagram()
+    assert modaluq.StabilityCriteria().min_mpc is None and modaluq.StabilityCriteria().max_mpd_deg is None
+    for i in range(0, d.n_poles, 7):
+        assert d.mpc[i] == pytest.approx(modal_phase_collinearity(d.mode_shape[:, i]).value, rel=1e-12)
+        assert d.mpd_deg[i] == pytest.approx(mean_phase_deviation(d.mode_shape[:, i]).value, rel=1e-12)
+    strict = result.stabilization_diagram(modaluq.StabilityCriteria(min_mpc=0.95, max_mpd_deg=15))
+    complex_poles = (d.mpc < 0.95) | (d.mpd_deg > 15)
+    assert complex_poles.any()
+    assert all(s == modaluq.PoleStatus.REJECTED for s in strict.status[complex_poles])
+    assert all(("MPC" in r) or ("MPD" in r) for r in strict.reason[complex_poles & (d.status != strict.status)])
+    ds = d.to_xarray()
+    np.testing.assert_array_equal(ds["mpc"].values, d.mpc)
+    with pytest.raises(ValueError, match="min_mpc"):
+        modaluq.StabilityCriteria(min_mpc=1.5)
+    with pytest.raises(ValueError, match="max_mpd_deg"):
+        modaluq.StabilityCriteria(max_mpd_deg=-1)

@@ -88,7 +88,7 @@ def test_to_dict_and_record_are_unchanged():
     assert StabilityCriteria().to_dict() == {
         "max_frequency_change": 0.01, "max_damping_change": 0.1, "min_mac": 0.98, "frequency_std_factor": 2.0,
         "max_frequency_cov": 0.05, "min_damping_ratio": 0.0, "max_damping_ratio": 0.2, "damping_std_factor": 2.0,
-        "max_damping_change_with_std": 0.5, "match_window": 0.05}
+        "max_damping_change_with_std": 0.5, "match_window": 0.05, "min_mpc": None, "max_mpd_deg": None}
     assert Settings(frequency_range=[1, 2], references=(0, 2)).to_dict() == {
         "block_rows": None, "past_block_rows": None, "orders": None, "n_blocks": None, "references": [0, 2],
         "uncertainty": True, "demean": True, "input_rcond": 1e-10, "threads": 1, "freeze_noise": True,

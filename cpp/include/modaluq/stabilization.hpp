@@ -18,6 +18,7 @@
 
 #include "errors.hpp"
 #include "identify.hpp"
+#include "indicators.hpp"
 #include "modal.hpp"
 
 namespace modaluq {
@@ -61,6 +62,13 @@ struct StabilityCriteria {
     double match_window = 0.05;           ///< largest |df| / f_prev for a pole to be a match at all
     /// band of interest, Hz (low, high): poles outside are rejected; empty: no band
     std::optional<std::pair<double, double>> frequency_range;
+    /// smallest modal phase collinearity of a pole's shape (indicators.hpp), in [0, 1]; poles below
+    /// are rejected. Empty (the default): no such test (a complex mode of a non-proportionally
+    /// damped structure has a low MPC and is physical)
+    std::optional<double> min_mpc;
+    /// largest mean phase deviation of a pole's shape, degrees in [0, 90]; poles above are
+    /// rejected. Empty (the default): no such test
+    std::optional<double> max_mpd_deg;
 
     void validate() const {
         auto nonneg = [](double x, const char* name) {
@@ -84,6 +92,10 @@ struct StabilityCriteria {
                         "max_damping_ratio must be in [-1, 1], got ", max_damping_ratio);
         detail::require(max_damping_ratio > min_damping_ratio, "max_damping_ratio must be > min_damping_ratio (",
                         min_damping_ratio, "), got ", max_damping_ratio);
+        if (min_mpc) detail::require(*min_mpc >= 0.0 && *min_mpc <= 1.0, "min_mpc must be in [0, 1], got ", *min_mpc);
+        if (max_mpd_deg)
+            detail::require(*max_mpd_deg >= 0.0 && *max_mpd_deg <= 90.0, "max_mpd_deg must be in [0, 90] degrees, got ",
+                            *max_mpd_deg);
         if (frequency_range)
             detail::require(frequency_range->first >= 0.0 && frequency_range->first < frequency_range->second,
                             "frequency_range must be (low, high) Hz with 0 <= low < high, got (",
@@ -226,6 +238,8 @@ struct Diagram {
     Eigen::VectorXd damping_change;       ///< |dxi| / |xi_prev|
     Eigen::VectorXd mac;                  ///< MAC with the match
     Eigen::VectorXd frequency_change_std; ///< |df| / sqrt(sf^2 + sf_prev^2) (NaN without the sigma test)
+    Eigen::VectorXd mpc;                  ///< modal phase collinearity of each pole's shape (indicators.hpp)
+    Eigen::VectorXd mpd_deg;              ///< mean phase deviation of each pole's shape, degrees
     StabilityCriteria criteria;           ///< the thresholds applied
 
     Index size() const { return poles.size(); }
@@ -276,8 +290,15 @@ inline Diagram stabilization_diagram(Poles poles, const StabilityCriteria& crite
 
     using detail::format_number;
     using detail::percent;
+    d.mpc.setConstant(n, nan);
+    d.mpd_deg.setConstant(n, nan);
     std::vector<char> valid(n, 0);
     for (Index i = 0; i < n; ++i) {
+        const Eigen::VectorXcd shape = poles.mode_shape.col(i);
+        if (shape.allFinite() && shape.squaredNorm() > 0.0) {
+            d.mpc(i) = modal_phase_collinearity(shape);
+            d.mpd_deg(i) = mean_phase_deviation(shape).value;
+        }
         std::vector<std::string> why;
         if (c.frequency_range && !(c.frequency_range->first <= f(i) && f(i) <= c.frequency_range->second))
             why.push_back("outside the band " + format_number("%g", c.frequency_range->first) + "-" +
@@ -292,6 +313,11 @@ inline Diagram stabilization_diagram(Poles poles, const StabilityCriteria& crite
             else if (sf(i) / f(i) > *c.max_frequency_cov)
                 why.push_back("frequency std/f " + percent(sf(i) / f(i)) + " > " + percent(*c.max_frequency_cov));
         }
+        if (c.min_mpc && !(d.mpc(i) >= *c.min_mpc))
+            why.push_back("MPC " + format_number("%.3g", d.mpc(i)) + " < " + format_number("%.3g", *c.min_mpc));
+        if (c.max_mpd_deg && !(d.mpd_deg(i) <= *c.max_mpd_deg))
+            why.push_back("MPD " + format_number("%.3g", d.mpd_deg(i)) + " deg > " +
+                          format_number("%.3g", *c.max_mpd_deg) + " deg");
         if (why.empty()) valid[i] = 1;
         else d.reason[i] = detail::join(why);
     }
