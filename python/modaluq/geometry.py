@@ -48,7 +48,9 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["Constraint", "Geometry", "NodeDisplacements", "direction_vector"]
+from .checks import check_integer
+
+__all__ = ["Constraint", "Geometry", "NodeDisplacements", "direction_vector", "mode_displacements"]
 
 #: axis names accepted for a direction, as in UFF's +X ... -Z
 AXES = {"x": (1.0, 0.0, 0.0), "y": (0.0, 1.0, 0.0), "z": (0.0, 0.0, 1.0)}
@@ -634,3 +636,26 @@ def _read_uff_nodes_lines(path: Path):
     if not ids:
         raise ValueError(f"{path}: no node dataset (UFF 15 or 2411)")
     return ids, xyz, lines
+
+
+def mode_displacements(modes, mode: int, geometry):
+    """The :class:`~modaluq.geometry.NodeDisplacements` of mode ``mode`` (from 1) of ``modes``
+    (a :class:`~modaluq.SelectedModes` or anything with ``mode_shape`` (l, n_modes) and
+    ``output_names``), with the shape covariance when ``modes`` carries it
+    (``mode_shape_covariance``), else the per-channel σ (``mode_shape_std_real/imag``)."""
+    shape = np.asarray(modes.mode_shape)
+    n_modes = shape.shape[1] if shape.ndim == 2 else 0
+    k = check_integer("mode", mode, minimum=1, maximum=max(n_modes, 1)) - 1
+    if not n_modes:
+        raise ValueError("mode: there are no modes")
+    names = tuple(getattr(modes, "output_names", ()) or ())
+    if not names:
+        raise ValueError("modes has no output_names: the geometry places channels by name")
+    cov = getattr(modes, "mode_shape_covariance", None)
+    if cov is not None:
+        return geometry.displacements(shape[:, k], names, covariance=np.asarray(cov)[k])
+    sr, si = getattr(modes, "mode_shape_std_real", None), getattr(modes, "mode_shape_std_imag", None)
+    if sr is None and si is None:
+        return geometry.displacements(shape[:, k], names)
+    return geometry.displacements(shape[:, k], names, std_real=None if sr is None else np.asarray(sr)[:, k],
+                                  std_imag=None if si is None else np.asarray(si)[:, k])

@@ -26,9 +26,10 @@ import numpy as np
 
 from .atomic import write_atomically
 from .checks import check_integer, check_real
+from .geometry import mode_displacements
 from .plot import StandaloneFigure
 
-__all__ = ["animate_shape", "mode_displacements", "peak_phase", "plot_shape"]
+__all__ = ["animate_shape", "node_phases", "peak_phase", "plot_shape"]
 
 #: the largest node displacement drawn, as a fraction of the structure's size (``scale=None``)
 DISPLAY_FRACTION = 0.15
@@ -39,29 +40,6 @@ ENVELOPE_SIGMA = 2.0
 ENVELOPE_MIN_AXIS = 1e-3
 #: colour map of a node's phase (folded to -90°..90°: 0 = in phase or in antiphase)
 PHASE_CMAP = "coolwarm"
-
-
-def mode_displacements(modes, mode: int, geometry):
-    """The :class:`~modaluq.geometry.NodeDisplacements` of mode ``mode`` (from 1) of ``modes``
-    (a :class:`~modaluq.SelectedModes` or anything with ``mode_shape`` (l, n_modes) and
-    ``output_names``), with the shape covariance when ``modes`` carries it
-    (``mode_shape_covariance``), else the per-channel σ (``mode_shape_std_real/imag``)."""
-    shape = np.asarray(modes.mode_shape)
-    n_modes = shape.shape[1] if shape.ndim == 2 else 0
-    k = check_integer("mode", mode, minimum=1, maximum=max(n_modes, 1)) - 1
-    if not n_modes:
-        raise ValueError("mode: there are no modes")
-    names = tuple(getattr(modes, "output_names", ()) or ())
-    if not names:
-        raise ValueError("modes has no output_names: the geometry places channels by name")
-    cov = getattr(modes, "mode_shape_covariance", None)
-    if cov is not None:
-        return geometry.displacements(shape[:, k], names, covariance=np.asarray(cov)[k])
-    sr, si = getattr(modes, "mode_shape_std_real", None), getattr(modes, "mode_shape_std_imag", None)
-    if sr is None and si is None:
-        return geometry.displacements(shape[:, k], names)
-    return geometry.displacements(shape[:, k], names, std_real=None if sr is None else np.asarray(sr)[:, k],
-                                  std_imag=None if si is None else np.asarray(si)[:, k])
 
 
 def peak_phase(value: np.ndarray) -> float:
