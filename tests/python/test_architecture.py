@@ -29,7 +29,7 @@ LAYERS = {
     # Diagram.select_modes() -> SelectedModes.to_dict()): a module imports the types it makes and
     # takes the types it is given by their fields, so plots, formats and the functions that make
     # the next result sit below the types they take.
-    "modaluq.plot": 3, "modaluq.export": 3, "modaluq.shapes": 3, "modaluq.exchange": 3,
+    "modaluq.plot": 3, "modaluq.export": 3, "modaluq.shapes": 3, "modaluq.exchange": 3, "modaluq.htmlreport": 3,
     "modaluq.selection": 4,
     "modaluq.stabilization": 5,
     "modaluq.results": 6,
