@@ -233,17 +233,28 @@ def _shape_bar_figure(go, selected, k):
     return fig
 
 
+#: Per-mode indicators shown in the table when the selected modes carry them (field name → column):
+#: the hook for the pole indicators with σ (MPC, MPD; issue 24 item 5): a ``SelectedModes`` with
+#: ``mpc`` and ``mpc_std`` (n_modes,) arrays gets an "MPC ± σ" column, nothing else to change.
+INDICATOR_COLUMNS = {"mpc": "MPC", "mpd": "MPD"}
+
+
 def _table(selected) -> str:
     rows = []
     flags = np.asarray(getattr(selected, "noise_coupled", np.zeros(selected.n_modes, bool)), bool)
+    indicators = {name: (np.asarray(getattr(selected, name), float),
+                         np.asarray(getattr(selected, f"{name}_std", np.full(selected.n_modes, np.nan)), float))
+                  for name in INDICATOR_COLUMNS if getattr(selected, name, None) is not None}
     for k in range(selected.n_modes):
         cells = [str(k + 1), f"{selected.frequency_hz[k]:.5g}", _fmt(float(selected.frequency_std[k]), 3),
                  _fmt(float(selected.frequency_spread[k]), 3), f"{100 * selected.damping_ratio[k]:.4g}",
                  _fmt(100 * float(selected.damping_std[k]), 3), _fmt(100 * float(selected.damping_spread[k]), 3),
-                 str(int(selected.representative_order[k])), str(int(selected.n_poles[k])),
-                 "noise?" if flags[k] else ""]
+                 str(int(selected.representative_order[k])), str(int(selected.n_poles[k]))]
+        cells += [f"{_fmt(v[k], 3)} ± {_fmt(sd[k], 2)}" for v, sd in indicators.values()]
+        cells.append("noise?" if flags[k] else "")
         rows.append("<tr>" + "".join(f"<td>{html.escape(c)}</td>" for c in cells) + "</tr>")
-    head = ["mode", "f [Hz]", "σ f [Hz]", "spread f", "ξ [%]", "σ ξ [%]", "spread ξ", "order", "poles", ""]
+    head = ["mode", "f [Hz]", "σ f [Hz]", "spread f", "ξ [%]", "σ ξ [%]", "spread ξ", "order", "poles"]
+    head += [f"{INDICATOR_COLUMNS[n]} ± σ" for n in indicators] + [""]
     return ("<table><thead><tr>" + "".join(f"<th>{html.escape(h)}</th>" for h in head) + "</tr></thead><tbody>"
             + "".join(rows) + "</tbody></table>")
 

@@ -237,7 +237,7 @@ def plot_shape(modes, mode: int, geometry, *, ax=None, scale=None, sigma=ENVELOP
     ax.set_title(_title(modes, mode - 1, disp, geometry, lag), fontsize=9)
     from matplotlib.cm import ScalarMappable
 
-    cb = fig.colorbar(ScalarMappable(norm=drawing.norm, cmap=drawing.cmap), ax=ax, shrink=0.5, pad=0.0,
+    cb = fig.colorbar(ScalarMappable(norm=drawing.norm, cmap=drawing.cmap), ax=ax, shrink=0.5, pad=0.06,
                       location="bottom", aspect=30)
     cb.set_label("phase of node motion [°] (0: as a real mode)", fontsize=8)
     cb.ax.tick_params(labelsize=7)
