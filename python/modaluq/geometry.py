@@ -121,7 +121,7 @@ class Constraint:
         return out
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class NodeDisplacements:
     """Per-node complex 3-D displacement of one shape, with its covariance when known.
 
@@ -153,7 +153,7 @@ class NodeDisplacements:
         return None if self.covariance is None else self.covariance[:, :3, :3]
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)  # arrays: compared by identity (== of arrays is not a bool)
 class Geometry:
     """Nodes, lines and channel placement; see the module docstring and docs/shapes.md."""
 

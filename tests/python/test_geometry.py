@@ -241,3 +241,11 @@ def test_selected_modes_carry_the_shape_covariance_of_their_representative_pole(
     other = modaluq.identify(chain.y[:5000], fs=chain.fs, block_rows=15, orders=range(2, 31, 2))
     with pytest.raises(ValueError, match="another run"):
         result.stabilization_diagram().select_modes().with_shape_covariance(other)
+
+
+def test_from_file_takes_toml_only_and_without_uncertainty_there_is_no_covariance(tmp_path, chain):
+    with pytest.raises(ValueError, match="expected a .toml file"):
+        Geometry.from_file(tmp_path / "geo.uff")
+    result = modaluq.identify(chain.y, fs=chain.fs, block_rows=15, orders=range(2, 31, 2), uncertainty=False)
+    sel = result.select_modes()
+    assert sel.n_modes and sel.mode_shape_covariance is None
