@@ -260,7 +260,7 @@ class Analysis:
         step("stabilization diagram")
         self.diagram = stabilization_diagram(result, self.criteria, output_names=self.output_names)
         step("clustering")
-        self.selected = select_modes(self.diagram, self.clustering).with_shape_covariance(result)
+        self.selected = select_modes(self.diagram, self.clustering)
         self.warnings = tuple(_warnings_of_selection(result, self.selected))
         if issue_warnings:
             for w in self.warnings:

@@ -12,7 +12,7 @@ What is written (pyuff, ASCII):
   from their constraint, still nodes 0). ID line 4 gives f, ξ and their σ in words;
 - the **standard deviations** in a second file (``<name>.std.uff`` beside ``modes.uff``): the
   same datasets, each node component holding ``σ(Re u) + i σ(Im u)`` (from the node covariance,
-  exact with ``SelectedModes.mode_shape_covariance``). They are kept apart so that ME'scope,
+  exact with ``SelectedModes.mode_covariance``). They are kept apart so that ME'scope,
   ARTeMIS or pyOMA2 opening ``modes.uff`` see modes only.
 
 UFF stores numbers as E13.5 text: 6 significant digits (what the round-trip tests check).
@@ -147,6 +147,7 @@ def write_uff(path, modes, geometry: Geometry, *, std_path="auto") -> list:
         raise ValueError(f"path {os.fspath(path)!r}: a Universal File ends in .uff or .unv")
     written = [_write_sets(path, geometry_datasets(geometry) + mode_datasets(modes, geometry))]
     has_std = getattr(modes, "mode_shape_covariance", None) is not None or \
+        getattr(modes, "mode_covariance", None) is not None or \
         getattr(modes, "mode_shape_std_real", None) is not None
     if std_path is not None and has_std and np.asarray(modes.mode_shape).shape[1]:
         sp = std_path_of(path) if std_path == "auto" else Path(std_path)

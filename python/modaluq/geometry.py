@@ -641,8 +641,9 @@ def _read_uff_nodes_lines(path: Path):
 def mode_displacements(modes, mode: int, geometry):
     """The :class:`~modaluq.geometry.NodeDisplacements` of mode ``mode`` (from 1) of ``modes``
     (a :class:`~modaluq.SelectedModes` or anything with ``mode_shape`` (l, n_modes) and
-    ``output_names``), with the shape covariance when ``modes`` carries it
-    (``mode_shape_covariance``), else the per-channel σ (``mode_shape_std_real/imag``)."""
+    ``output_names``), with the shape covariance when ``modes`` carries it (``mode_covariance``,
+    (n_modes, 2+2l, 2+2l) of [f, ξ, Re φ, Im φ], or ``mode_shape_covariance``, its (2l, 2l) shape
+    block), else the per-channel σ (``mode_shape_std_real/imag``)."""
     shape = np.asarray(modes.mode_shape)
     n_modes = shape.shape[1] if shape.ndim == 2 else 0
     k = check_integer("mode", mode, minimum=1, maximum=max(n_modes, 1)) - 1
@@ -651,7 +652,12 @@ def mode_displacements(modes, mode: int, geometry):
     names = tuple(getattr(modes, "output_names", ()) or ())
     if not names:
         raise ValueError("modes has no output_names: the geometry places channels by name")
+    # the full covariance of [Re φ, Im φ]: SelectedModes.mode_covariance holds [f, ξ, Re φ, Im φ]
+    # (its shape block); another source of shapes may give the shape block itself
     cov = getattr(modes, "mode_shape_covariance", None)
+    full = getattr(modes, "mode_covariance", None)
+    if cov is None and full is not None:
+        cov = np.asarray(full)[:, 2:, 2:]
     if cov is not None:
         return geometry.displacements(shape[:, k], names, covariance=np.asarray(cov)[k])
     sr, si = getattr(modes, "mode_shape_std_real", None), getattr(modes, "mode_shape_std_imag", None)

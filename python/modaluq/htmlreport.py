@@ -233,18 +233,22 @@ def _shape_bar_figure(go, selected, k):
     return fig
 
 
-#: Per-mode indicators shown in the table when the selected modes carry them (field name → column):
-#: the hook for the pole indicators with σ (MPC, MPD; issue 24 item 5): a ``SelectedModes`` with
-#: ``mpc`` and ``mpc_std`` (n_modes,) arrays gets an "MPC ± σ" column, nothing else to change.
-INDICATOR_COLUMNS = {"mpc": "MPC", "mpd": "MPD"}
+#: Per-mode indicators shown in the table when the selected modes carry them: field → (column,
+#: field of its σ). A column appears when any mode has a finite value (SelectedModes: MPC and
+#: MPD with their σ, modaluq.indicators).
+INDICATOR_COLUMNS = {"mpc": ("MPC", "mpc_std"), "mpd_deg": ("MPD [°]", "mpd_std_deg")}
 
 
 def _table(selected) -> str:
     rows = []
     flags = np.asarray(getattr(selected, "noise_coupled", np.zeros(selected.n_modes, bool)), bool)
-    indicators = {name: (np.asarray(getattr(selected, name), float),
-                         np.asarray(getattr(selected, f"{name}_std", np.full(selected.n_modes, np.nan)), float))
-                  for name in INDICATOR_COLUMNS if getattr(selected, name, None) is not None}
+    indicators = {}
+    for name, (_, std_name) in INDICATOR_COLUMNS.items():
+        values = getattr(selected, name, None)
+        if values is not None and np.shape(values) == (selected.n_modes,) and np.isfinite(values).any():
+            std = getattr(selected, std_name, None)
+            indicators[name] = (np.asarray(values, float),
+                                np.full(selected.n_modes, np.nan) if std is None else np.asarray(std, float))
     for k in range(selected.n_modes):
         cells = [str(k + 1), f"{selected.frequency_hz[k]:.5g}", _fmt(float(selected.frequency_std[k]), 3),
                  _fmt(float(selected.frequency_spread[k]), 3), f"{100 * selected.damping_ratio[k]:.4g}",
@@ -254,7 +258,7 @@ def _table(selected) -> str:
         cells.append("noise?" if flags[k] else "")
         rows.append("<tr>" + "".join(f"<td>{html.escape(c)}</td>" for c in cells) + "</tr>")
     head = ["mode", "f [Hz]", "σ f [Hz]", "spread f", "ξ [%]", "σ ξ [%]", "spread ξ", "order", "poles"]
-    head += [f"{INDICATOR_COLUMNS[n]} ± σ" for n in indicators] + [""]
+    head += [f"{INDICATOR_COLUMNS[n][0]} ± σ" for n in indicators] + [""]
     return ("<table><thead><tr>" + "".join(f"<th>{html.escape(h)}</th>" for h in head) + "</tr></thead><tbody>"
             + "".join(rows) + "</tbody></table>")
 

@@ -276,8 +276,7 @@ class Result:
 
     def select_modes(self, criteria=None, settings=None):
         """Physical modes chosen automatically from the stable poles (see :func:`modaluq.select_modes`)."""
-        # with each mode's shape covariance, for its displacements on a geometry (docs/shapes.md)
-        return select_modes(self.stabilization_diagram(criteria), settings).with_shape_covariance(self)
+        return select_modes(self.stabilization_diagram(criteria), settings)
 
     def plot(self, ax=None, *, y=None, criteria=None, select: bool = True, **kwargs):
         """Draw the stabilization diagram with ±σ_f bars (over the output spectrum when ``y`` is given).

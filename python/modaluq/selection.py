@@ -147,10 +147,6 @@ class SelectedModes:
     #: the identification's ``Result.low_signal_to_noise``: H is within 3 σ of its own estimation
     #: noise, so any of these modes may be noise (the table's heading says so)
     low_signal_to_noise: bool = False
-    #: (n_modes, 2l, 2l) covariance of ``[Re φ, Im φ]`` of each representative pole (the core's
-    #: ``Modes.covariance``), what the geometry propagates exactly to the nodes (docs/shapes.md);
-    #: None when unknown (:meth:`with_shape_covariance` fills it from the identification's result)
-    mode_shape_covariance: np.ndarray | None = None
 
     #: the heading of :meth:`__str__` when :attr:`low_signal_to_noise`
     LOW_SIGNAL_TO_NOISE_HEADING = ("H is within 3 std of its estimation noise: these modes cannot be told from "
@@ -256,30 +252,6 @@ class SelectedModes:
     def __repr__(self) -> str:
         f = np.array2string(self.frequency_hz, precision=3, separator=", ")
         return f"SelectedModes(n_modes={self.n_modes}, frequency_hz={f})"
-
-    def with_shape_covariance(self, result) -> "SelectedModes":
-        """A copy with :attr:`mode_shape_covariance` read from ``result`` (the :class:`~modaluq.Result`
-        the diagram was made from): each representative pole's ``Modes.covariance``, its shape block.
-        Unchanged when the result has no uncertainty. ``ValueError`` when ``result`` is another run."""
-        modes = getattr(result, "modes", None)
-        if modes is None:
-            raise TypeError(f"result must be a modaluq.Result; got {type(result).__name__}")
-        if not self.n_modes or not all(m.covariance is not None for m in modes if m.n_modes):
-            return self
-        # the diagram's poles are the orders' modes in turn (stabilization_diagram)
-        starts = np.concatenate([[0], np.cumsum([m.n_modes for m in modes])])
-        l = self.mode_shape.shape[0]
-        out = np.empty((self.n_modes, 2 * l, 2 * l))
-        for i, p in enumerate(self.representative_pole):
-            o = int(np.searchsorted(starts, p, side="right") - 1)
-            if o >= len(modes):
-                raise ValueError(f"result: pole {int(p)} of mode {i + 1} is not in it (another run?)")
-            m, j = modes[o], int(p - starts[o])
-            if m.order != self.representative_order[i] or m.frequency_hz[j] != self.frequency_hz[i]:
-                raise ValueError(f"result: mode {i + 1}'s representative pole (order {self.representative_order[i]}, "
-                                 f"{self.frequency_hz[i]:.6g} Hz) is not at pole {int(p)}: another run?")
-            out[i] = m.covariance[j][2:, 2:]
-        return dataclasses.replace(self, mode_shape_covariance=out)
 
     def plot_shape(self, mode: int, geometry, *, ax=None, **kwargs):
         """Mode ``mode`` (from 1, as in the tables) on ``geometry`` in 3-D with its ±2σ envelope;

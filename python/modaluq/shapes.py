@@ -204,7 +204,7 @@ def plot_shape(modes, mode: int, geometry, *, ax=None, scale=None, sigma=ENVELOP
     ----------
     modes : SelectedModes
         Or anything with ``frequency_hz``, ``damping_ratio``, ``mode_shape`` and ``output_names``;
-        its ``mode_shape_covariance`` (exact envelope) or ``mode_shape_std_real/imag``.
+        its ``mode_covariance`` (exact envelope) or ``mode_shape_std_real/imag``.
     mode : int
         From 1, as in the tables.
     geometry : Geometry

@@ -229,18 +229,24 @@ def test_uff_15_and_82_with_a_channel_map(tmp_path, frame):
         Geometry.from_uff(path, {"ax": {"node": 5, "direction": "+x"}})
 
 
-def test_selected_modes_carry_the_shape_covariance_of_their_representative_pole(chain):
+def test_selected_modes_carry_the_covariance_of_their_representative_pole(chain):
     result = modaluq.identify(chain.y, fs=chain.fs, block_rows=15, orders=range(2, 31, 2))
     sel = result.select_modes()
-    assert sel.n_modes and sel.mode_shape_covariance.shape == (sel.n_modes, 6, 6)
-    c = sel.mode_shape_covariance
+    assert sel.n_modes and sel.mode_covariance.shape == (sel.n_modes, 8, 8)
+    c = sel.mode_covariance[:, 2:, 2:]
     np.testing.assert_allclose(np.sqrt(np.diagonal(c, axis1=1, axis2=2)[:, :3]).T, sel.mode_shape_std_real,
                                rtol=1e-12, atol=1e-15)
     np.testing.assert_allclose(np.sqrt(np.diagonal(c, axis1=1, axis2=2)[:, 3:]).T, sel.mode_shape_std_imag,
                                rtol=1e-12, atol=1e-15)
-    other = modaluq.identify(chain.y[:5000], fs=chain.fs, block_rows=15, orders=range(2, 31, 2))
-    with pytest.raises(ValueError, match="another run"):
-        result.stabilization_diagram().select_modes().with_shape_covariance(other)
+    # the node covariance from it is that of the shape block: exact, the plots' envelope
+    geo = Geometry.from_dict({"nodes": [[1, 0, 0, 0], [2, 1, 0, 0], [3, 2, 0, 0]],
+                              "channels": [{"name": n, "node": i + 1, "direction": "z"}
+                                           for i, n in enumerate(sel.output_names)]})
+    from modaluq.geometry import mode_displacements
+
+    d = mode_displacements(sel, 1, geo)
+    assert d.exact
+    np.testing.assert_allclose(d.covariance[:, 2, 2], np.diag(c[0])[:3], rtol=1e-12)
 
 
 def test_from_file_takes_toml_only_and_without_uncertainty_there_is_no_covariance(tmp_path, chain):
@@ -248,4 +254,4 @@ def test_from_file_takes_toml_only_and_without_uncertainty_there_is_no_covarianc
         Geometry.from_file(tmp_path / "geo.uff")
     result = modaluq.identify(chain.y, fs=chain.fs, block_rows=15, orders=range(2, 31, 2), uncertainty=False)
     sel = result.select_modes()
-    assert sel.n_modes and sel.mode_shape_covariance is None
+    assert sel.n_modes and sel.mode_covariance is None

@@ -100,22 +100,19 @@ def test_without_geometry_the_shapes_are_drawn_per_channel(tmp_path, chain):
     assert "no geometry given" in path.read_text(encoding="utf-8")
 
 
-def test_indicator_columns_appear_when_the_modes_carry_them(tmp_path, chain):
-    # the hook for MPC/MPD with σ: fields on the selected modes become table columns
+def test_the_table_shows_mpc_and_mpd_with_their_sigma(tmp_path, chain):
     import dataclasses
 
     result = modaluq.identify(chain.y, fs=chain.fs, block_rows=15, orders=range(2, 31, 2))
     d = result.stabilization_diagram()
     sel = d.select_modes()
-    plain = write_html_report(tmp_path / "a.html", d, sel).read_text(encoding="utf-8")
-    assert "MPC ± σ" not in plain
-    with_mpc = type("WithMPC", (type(sel),), {})
-    fields = {f.name: getattr(sel, f.name) for f in dataclasses.fields(sel)}
-    marked = with_mpc(**fields)
-    object.__setattr__(marked, "mpc", np.full(sel.n_modes, 0.987))
-    object.__setattr__(marked, "mpc_std", np.full(sel.n_modes, 0.004))
-    text = write_html_report(tmp_path / "b.html", d, marked).read_text(encoding="utf-8")
-    assert "<th>MPC ± σ</th>" in text and "<td>0.987 ± 0.004</td>" in text
+    text = write_html_report(tmp_path / "a.html", d, sel).read_text(encoding="utf-8")
+    assert "<th>MPC ± σ</th>" in text and "<th>MPD [°] ± σ</th>" in text
+    assert f"<td>{sel.mpc[0]:.3g} ± {sel.mpc_std[0]:.2g}</td>" in text
+    # unknown indicators (NaN): no column
+    blank = dataclasses.replace(sel, mpc=np.full(sel.n_modes, np.nan), mpd_deg=np.full(sel.n_modes, np.nan))
+    text = write_html_report(tmp_path / "b.html", d, blank).read_text(encoding="utf-8")
+    assert "MPC ± σ" not in text and "MPD [°] ± σ" not in text
 
 
 def test_refusals(tmp_path, chain):
