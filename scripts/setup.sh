@@ -11,11 +11,13 @@
 # runs on any x86-64/arm64 CPU, so a wheel copied to another machine does not die of SIGILL).
 set -euo pipefail
 cd "$(dirname "$0")/.."
-extras="plot,io,export,monitor"
+extras="plot,io,export,monitor,report"
 apt_pkgs=(g++ make cmake python3-venv python3-dev libeigen3-dev libopenblas-dev)
 if [[ "${1:-}" == "--test" ]]; then
   extras="all"
-  apt_pkgs+=(doctest-dev)
+  # chromium: the HTML report's browser test (tests/python/test_htmlreport.py; Debian's package, headless);
+  # fonts-dejavu-core: text in its screenshots
+  apt_pkgs+=(doctest-dev chromium fonts-dejavu-core)
 fi
 
 missing=()

@@ -23,6 +23,7 @@ The wing's names here (``monitor``, ``Monitoring``, ``load_tracks``, ``simulate_
 
 from ._core import NumericalError
 from .analysis import Analysis
+from .geometry import Geometry
 from .horizons import HorizonCheck, check_horizons
 from .identification import identify
 from .results import ModalUQWarning, Modes, Result
@@ -38,6 +39,7 @@ __all__ = [
     "ClusteringSettings",
     "CovarianceAccumulator",
     "Diagram",
+    "Geometry",
     "HorizonCheck",
     "ModalUQWarning",
     "Modes",

@@ -162,7 +162,7 @@ def check_sampling_frequency(fs) -> float:
 
 #: optional dependency -> the extra of modaluq that installs it
 EXTRAS = {"xarray": "export", "netCDF4": "export", "distributed": "monitor", "zarr": "monitor", "pyarrow": "monitor",
-          "cryptography": "monitor"}
+          "cryptography": "monitor", "pyuff": "io", "plotly": "report"}
 
 
 def require(module: str, purpose: str = "this"):

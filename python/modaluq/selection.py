@@ -253,6 +253,20 @@ class SelectedModes:
         f = np.array2string(self.frequency_hz, precision=3, separator=", ")
         return f"SelectedModes(n_modes={self.n_modes}, frequency_hz={f})"
 
+    def plot_shape(self, mode: int, geometry, *, ax=None, **kwargs):
+        """Mode ``mode`` (from 1, as in the tables) on ``geometry`` in 3-D with its ±2σ envelope;
+        see :func:`modaluq.shapes.plot_shape`. Returns the Figure."""
+        from .shapes import plot_shape
+
+        return plot_shape(self, mode, geometry, ax=ax, **kwargs)
+
+    def animate(self, mode: int, geometry, *, path=None, **kwargs):
+        """Mode ``mode`` (from 1) moving on ``geometry`` over one cycle; written to ``path`` (.gif,
+        or .mp4 with ffmpeg) when given. See :func:`modaluq.shapes.animate_shape`. Returns the animation."""
+        from .shapes import animate_shape
+
+        return animate_shape(self, mode, geometry, path=path, **kwargs)
+
     def plot(self, fig=None, *, channel_positions=None):
         """Mode shapes with ±σ error bars; see :func:`modaluq.plot.plot_mode_shapes`. Returns the Figure."""
         from .plot import plot_mode_shapes

@@ -23,13 +23,13 @@ LAYERS = {
     # settings and the signal helpers they are applied with; the side leaves (files, simulator)
     "modaluq.settings": 2, "modaluq.preprocess": 2, "modaluq.auto_settings": 2, "modaluq.spectrum": 2,
     "modaluq.indicators": 2,
-    "modaluq.harmonics": 2, "modaluq.provenance": 2, "modaluq.simulate.*": 2, "modaluq.io.*": 2,
+    "modaluq.harmonics": 2, "modaluq.provenance": 2, "modaluq.geometry": 2, "modaluq.simulate.*": 2, "modaluq.io.*": 2,
     "modaluq.monitoring.simulator": 2,  # the monitoring wing's campaign simulator: a side leaf
     # The result types sit above what their convenience methods reach (Result.plot() ->
     # Diagram.select_modes() -> SelectedModes.to_dict()): a module imports the types it makes and
     # takes the types it is given by their fields, so plots, formats and the functions that make
     # the next result sit below the types they take.
-    "modaluq.plot": 3, "modaluq.export": 3,
+    "modaluq.plot": 3, "modaluq.export": 3, "modaluq.shapes": 3, "modaluq.exchange": 3, "modaluq.htmlreport": 3,
     "modaluq.selection": 4,
     "modaluq.stabilization": 5,
     "modaluq.results": 6,

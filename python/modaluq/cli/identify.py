@@ -18,6 +18,7 @@ from .. import export
 from .._core import NumericalError
 from ..analysis import Analysis
 from ..checks import require
+from ..exchange import std_path_of
 from ..io import SUPPORTED_EXTENSIONS
 from ..version import __version__
 from .common import CliError, check_image_paths, check_output_paths, integer_option, option_error, real_option
@@ -119,16 +120,32 @@ def parse_read_options(items) -> dict:
     return out
 
 
+#: --out extensions of Universal Files (modes as UFF 55 on the --geometry; docs/shapes.md §4)
+UFF_EXTENSIONS = (".uff", ".unv")
+
+
 def _check_outputs(args):
     """Fail fast (before any computation) on an unsupported, unwritable or destructive output path."""
     for p in args.out or []:
+        if Path(p).suffix.lower() in UFF_EXTENSIONS:
+            if not args.geometry:
+                raise ValueError(f"--out {p}: a UFF file places the modes on a geometry: give --geometry")
+            require("pyuff", f"--out {p}")
+            continue
         kind = export.EXTENSIONS.get(Path(p).suffix.lower())
         if kind is None:
-            raise ValueError(f"--out {p}: unsupported extension; use one of {', '.join(export.EXTENSIONS)}")
+            raise ValueError(f"--out {p}: unsupported extension; use one of "
+                             f"{', '.join((*export.EXTENSIONS, *UFF_EXTENSIONS))}")
         if kind == "netcdf":
             for module in ("xarray", "netCDF4"):
                 require(module, f"--out {p}")
+    if args.report:
+        if Path(args.report).suffix.lower() not in (".html", ".htm"):
+            raise ValueError(f"--report {args.report}: the report is an .html file")
+        require("plotly", f"--report {args.report}")
     outputs = [("--out", p) for p in args.out or []]
+    outputs += [("--out", str(std_path_of(p))) for p in args.out or [] if Path(p).suffix.lower() in UFF_EXTENSIONS]
+    outputs += [("--report", args.report)] if args.report else []
     outputs += [(opt, p) for opt, p in (("--plot", args.plot), ("--plot-shapes", args.plot_shapes)) if p]
     for _, p in outputs:
         parent = Path(p).resolve().parent
@@ -144,13 +161,21 @@ def run(args) -> int:
 
     t_start = time.perf_counter()
     _check_outputs(args)
+    geometry = None
+    if args.geometry:
+        from ..geometry import Geometry
+
+        try:
+            geometry = Geometry.from_file(args.geometry)
+        except (OSError, ValueError) as exc:
+            raise CliError(f"--geometry {args.geometry}: {exc}") from None
     settings, criteria, clustering = analysis_settings(args)
     if args.orders is not None:
         _order_spec(args.orders)  # syntax, before the data are loaded; the bound needs them
     read_options = parse_read_options(args.read_option)
     options = set(vars(args))
 
-    n_steps = 4 + bool(args.plot) + bool(args.plot_shapes) + len(args.out or [])
+    n_steps = 4 + bool(args.plot) + bool(args.plot_shapes) + len(args.out or []) + bool(args.report)
     # shown on stderr only when it is a terminal (disable=None), cleared when done (leave=False)
     progress = tqdm(total=n_steps, desc=f"loading {Path(args.file).name}", unit="step", file=sys.stderr,
                     leave=False, disable=True if args.no_progress else None,
@@ -171,6 +196,11 @@ def run(args) -> int:
                 analysis = analysis.with_settings(orders=parse_orders(args.orders, largest, bound=why))
         except ValueError as exc:
             raise option_error(exc, options) from None
+        if geometry is not None:
+            try:  # the record's channels against the geometry's, by name, before the identification
+                geometry.channel_order(analysis.output_names)
+            except ValueError as exc:
+                raise CliError(f"--geometry {args.geometry}: {exc}") from None
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")  # kept in analysis.warnings, printed below
@@ -190,15 +220,32 @@ def run(args) -> int:
             step("plotting the mode shapes")
             analysis.selected.plot().savefig(args.plot_shapes, dpi=args.dpi)
             written.append(args.plot_shapes)
-        if args.out:
+        if args.out or args.report:
             stamp = analysis.provenance(cli_arguments=stated_options(args, criteria, clustering))
-            for p in args.out:
-                step(f"writing {Path(p).name}")
-                try:
-                    export.write(p, analysis.diagram, analysis.selected, stamp=stamp, extra=analysis.report())
-                except ImportError as exc:
-                    raise CliError(f"--out {p}: {exc}") from None
-                written.append(p)
+        for p in args.out or []:
+            step(f"writing {Path(p).name}")
+            try:
+                if Path(p).suffix.lower() in UFF_EXTENSIONS:
+                    from ..exchange import write_uff
+
+                    written += [str(w) for w in write_uff(p, analysis.selected, geometry)]
+                    continue
+                export.write(p, analysis.diagram, analysis.selected, stamp=stamp, extra=analysis.report())
+            except ImportError as exc:
+                raise CliError(f"--out {p}: {exc}") from None
+            written.append(p)
+        if args.report:
+            step(f"writing {Path(args.report).name}")
+            from ..htmlreport import write_html_report
+            from ..spectrum import output_spectrum_singular_values
+
+            pre = analysis.preprocessed
+            write_html_report(args.report, analysis.diagram, analysis.selected, geometry=geometry,
+                              spectrum=output_spectrum_singular_values(pre.y, pre.fs, nperseg=args.nperseg),
+                              title=f"modaluq identify {Path(args.file).name}",
+                              run_description=analysis.describe_run() + "\n\n" + analysis.describe_modes(),
+                              warnings=analysis.warnings, stamp=stamp)
+            written.append(args.report)
 
     print(f"modaluq {__version__} identify: {args.file}")
     print(analysis.describe_run())
@@ -240,8 +287,15 @@ def register(subparsers) -> argparse.ArgumentParser:
     g.add_argument("--dpi", type=real_option(0, MAX_DPI), default=120,
                    help=f"resolution of raster images (default 120, at most {MAX_DPI})")
     g.add_argument("--out", action="append", metavar="PATH", default=None,
-                   help="write a report; .json (modes, sigma, spread, provenance stamp), .csv (modes) "
-                        "or .nc (full diagram, NetCDF); repeat for several")
+                   help="write a report; .json (modes, sigma, spread, provenance stamp), .csv (modes), "
+                        ".nc (full diagram, NetCDF) or .uff (geometry and modes as UFF 15/82/55 on --geometry, "
+                        "their std in NAME.std.uff); repeat for several")
+    g.add_argument("--geometry", metavar="TOML", default=None,
+                   help="the test geometry (nodes, lines, each channel's node and direction; docs/shapes.md): "
+                        "the report animates the modes on it and --out modes.uff writes them as UFF 55")
+    g.add_argument("--report", metavar="HTML", default=None,
+                   help="write one self-contained interactive HTML report (stabilization diagram with sigma, "
+                        "modes, MAC, the modes animated on --geometry in 3-D); needs plotly")
     g.add_argument("--overwrite", action="store_true",
                    help="replace existing output files (the input file is never overwritten)")
     g.add_argument("--no-progress", action="store_true", help="no progress display on stderr")

@@ -61,7 +61,8 @@ def test_import_modaluq_is_light(module):
     loaded = modules_after(f"""
 import json, sys
 import {module}
-heavy = ('matplotlib', 'pandas', 'xarray', 'dask', 'distributed', 'scipy', 'h5py', 'nptdms', 'pyuff', 'zarr')
+heavy = ('matplotlib', 'pandas', 'xarray', 'dask', 'distributed', 'scipy', 'h5py', 'nptdms', 'pyuff', 'zarr',
+         'plotly')
 print(json.dumps(sorted({{m.split('.')[0] for m in sys.modules}} & set(heavy))))
 """)
     assert loaded == []

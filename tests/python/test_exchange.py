@@ -1,0 +1,144 @@
+"""UFF exchange (modaluq.exchange): geometry → UFF 15 + 82, modes → UFF 55 with the standard
+deviations in a second UFF 55 file; read back by pyuff with the same numbers (UFF's 6 significant
+digits); UFF 55 files written by other programs read by modaluq."""
+
+import math
+import pathlib
+import types
+
+import numpy as np
+import pytest
+
+from modaluq.geometry import Geometry
+
+pyuff = pytest.importorskip("pyuff")
+
+from modaluq import exchange  # noqa: E402
+
+DATA = pathlib.Path(__file__).parent / "data" / "uff"
+RTOL = 1e-5  # E13.5: 6 significant digits
+
+
+@pytest.fixture
+def floor():
+    geo = Geometry.from_dict({
+        "name": "rigid floor on columns",
+        "nodes": [[1, 0, 0, 0], [2, 4, 0, 0], [3, 4, 3, 0], [4, 0, 3, 0],
+                  [11, 0, 0, 3], [12, 4, 0, 3], [13, 4, 3, 3], [14, 0, 3, 3]],
+        "lines": [[1, 11], [2, 12], [3, 13], [4, 14], [11, 12], [12, 13], [13, 14], [14, 11]],
+        "channels": [{"name": "ax", "node": 11, "direction": "x"}, {"name": "ay", "node": 11, "direction": "y"},
+                     {"name": "cx", "node": 13, "direction": [1, 0, 0]}],
+        "constraints": [{"kind": "rigid", "nodes": [11, 12, 13, 14], "channels": ["ax", "ay", "cx"], "normal": "z"}]})
+    rng = np.random.default_rng(2)
+    shape = np.array([[1.0, 0.3 + 0.1j], [0.2 - 0.05j, 1.0], [0.8 + 0.02j, -0.4]])
+    a = rng.standard_normal((2, 6, 6))
+    cov = 1e-4 * np.einsum("kij,klj->kil", a, a)
+    modes = types.SimpleNamespace(frequency_hz=np.array([1.25, 3.5]), damping_ratio=np.array([0.02, 0.011]),
+                                  frequency_std=np.array([0.01, 0.02]), damping_std=np.array([0.003, 0.002]),
+                                  mode_shape=shape, output_names=("ax", "ay", "cx"), mode_shape_covariance=cov)
+    return geo, modes
+
+
+def test_geometry_and_modes_round_trip_through_pyuff(tmp_path, floor):
+    geo, modes = floor
+    paths = exchange.write_uff(tmp_path / "modes.uff", modes, geo)
+    assert [p.name for p in paths] == ["modes.uff", "modes.std.uff"]
+    sets = pyuff.UFF(str(paths[0])).read_sets()
+    assert [s["type"] for s in sets] == [15, 82, 55, 55]
+    np.testing.assert_array_equal(sets[0]["node_nums"], geo.node_ids)
+    np.testing.assert_allclose(np.column_stack([sets[0][k] for k in "xyz"]), geo.coordinates, rtol=RTOL)
+    seq = [int(v) for v in sets[1]["nodes"]]
+    assert [[a, b] for a, b in zip(seq[:-1], seq[1:]) if a and b] == geo.lines.tolist()
+    for k in range(2):
+        s = sets[2 + k]
+        assert (s["analysis_type"], s["data_ch"], s["data_type"], s["mode_n"]) == (3, 2, 5, k + 1)
+        lam = complex(s["eig"])
+        np.testing.assert_allclose(abs(lam) / (2 * math.pi), modes.frequency_hz[k], rtol=RTOL)
+        np.testing.assert_allclose(-lam.real / abs(lam), modes.damping_ratio[k], rtol=RTOL)
+        u = geo.displacements(modes.mode_shape[:, k], modes.output_names).value
+        np.testing.assert_array_equal(s["node_nums"], geo.node_ids)
+        got = np.column_stack([s["r1"], s["r2"], s["r3"]])
+        np.testing.assert_allclose(got, u, rtol=RTOL, atol=1e-12)
+    # the standard deviations: σ(Re u) + i σ(Im u) of each node component, from the exact covariance
+    std = pyuff.UFF(str(paths[1])).read_sets()
+    assert [s["type"] for s in std] == [15, 82, 55, 55] and std[2]["id1"] == exchange.STD_ID
+    for k in range(2):
+        d = geo.displacements(modes.mode_shape[:, k], modes.output_names, covariance=modes.mode_shape_covariance[k])
+        var = np.diagonal(d.covariance, axis1=1, axis2=2)
+        got = np.column_stack([std[2 + k][r] for r in ("r1", "r2", "r3")])
+        np.testing.assert_allclose(got.real, np.sqrt(var[:, :3]), rtol=RTOL, atol=1e-14)
+        np.testing.assert_allclose(got.imag, np.sqrt(var[:, 3:]), rtol=RTOL, atol=1e-14)
+
+
+def test_modaluq_reads_its_own_file_back_with_the_geometry(tmp_path, floor):
+    geo, modes = floor
+    exchange.write_uff(tmp_path / "m.uff", modes, geo)
+    back = exchange.read_uff_modes(tmp_path / "m.uff")
+    assert back.n_modes == 2 and not back.is_std
+    np.testing.assert_allclose(back.frequency_hz, modes.frequency_hz, rtol=RTOL)
+    np.testing.assert_allclose(back.damping_ratio, modes.damping_ratio, rtol=RTOL)
+    np.testing.assert_array_equal(back.geometry.node_ids, geo.node_ids)
+    np.testing.assert_array_equal(back.geometry.lines, geo.lines)
+    # the nodal shape on the read geometry is the node displacement of the original
+    for k in range(2):
+        u = geo.displacements(modes.mode_shape[:, k], modes.output_names).value
+        v = back.geometry.displacements(back.mode_shape[:, k], back.output_names).value
+        np.testing.assert_allclose(v, u, rtol=RTOL, atol=1e-12)
+    assert exchange.read_uff_modes(tmp_path / "m.std.uff").is_std
+
+
+def test_geometry_uff_reads_back_as_a_geometry(tmp_path, floor):
+    geo, _ = floor
+    exchange.write_geometry_uff(tmp_path / "g.uff", geo)
+    back = Geometry.from_uff(tmp_path / "g.uff", {"ax": {"node": 11, "direction": "x"}})
+    np.testing.assert_array_equal(back.node_ids, geo.node_ids)
+    np.testing.assert_allclose(back.coordinates, geo.coordinates)
+    np.testing.assert_array_equal(back.lines, geo.lines)
+
+
+def test_a_uff55_written_by_another_program_is_read():
+    # an OMA program's complex mode (pyuff's sample file: ID lines "POMA ...", 7-digit E format)
+    m = exchange.read_uff_modes(DATA / "pyuff_uff55_sample_test_record10.uff")
+    lam = -0.1111111 + 41.11111j
+    np.testing.assert_allclose(m.frequency_hz, [abs(lam) / (2 * np.pi)], rtol=1e-7)
+    np.testing.assert_allclose(m.damping_ratio, [0.1111111 / abs(lam)], rtol=1e-7)
+    assert m.node_ids.tolist() == [60101, 111111] and m.geometry is None  # no nodes in the file
+    # each node's line: Re x, Im x, Re y, Im y, Re z, Im z
+    np.testing.assert_allclose(m.mode_shape[3:, 0], [0, 0.1111111 + 0.09111111j, 0.007111111 + 0.004111111j],
+                               rtol=1e-7)
+    np.testing.assert_allclose(m.mode_shape[:3, 0], [0, 0, -0.04111111 - 0.01111111j], rtol=1e-7)
+    assert m.ids[0][2].startswith("POMA:")
+    # normal modes (analysis type 2)
+    n = exchange.read_uff_modes(DATA / "pyuff_uff55_translation.uff")
+    assert n.n_modes == 3 and n.frequency_hz[0] == 10.0 and n.mode_shape.shape == (12, 3)
+    np.testing.assert_allclose(n.mode_shape[:3, 0], [-1.46518] * 3)
+
+
+def test_a_uff55_written_by_pyuff_directly_is_read(tmp_path):
+    # "another program": pyuff's own writer, a normal mode with its geometry
+    path = str(tmp_path / "other.uff")
+    uff = pyuff.UFF(path)
+    uff.write_sets([pyuff.prepare_15(node_nums=[5, 6], def_cs=[0, 0], disp_cs=[0, 0], color=[1, 1], x=[0.0, 1.0],
+                                     y=[0.0, 0.0], z=[0.0, 0.0]),
+                    pyuff.prepare_55(model_type=1, analysis_type=2, data_ch=2, spec_data_type=8, data_type=2,
+                                     n_data_per_node=3, load_case=1, mode_n=1, freq=7.5, modal_m=1.0,
+                                     modal_damp_vis=0.015, modal_damp_his=0.0, node_nums=np.array([5, 6]),
+                                     r1=np.array([0.0, 0.0]), r2=np.array([0.0, 0.0]), r3=np.array([0.5, 1.0]))],
+                   mode="add")
+    m = exchange.read_uff_modes(path)
+    assert (m.frequency_hz[0], m.damping_ratio[0]) == (7.5, 0.015)
+    np.testing.assert_allclose(m.mode_shape[:, 0], [0, 0, 0.5, 0, 0, 1.0])
+    assert m.geometry.n_nodes == 2 and m.output_names[2] == "5+Z"
+
+
+def test_refusals(tmp_path, floor):
+    geo, modes = floor
+    with pytest.raises(ValueError, match="ends in .uff or .unv"):
+        exchange.write_uff(tmp_path / "m.txt", modes, geo)
+    (tmp_path / "empty.uff").write_text("    -1\n    15\n    -1\n")
+    with pytest.raises(ValueError, match="empty.uff"):
+        exchange.read_uff_modes(tmp_path / "empty.uff")
+    bad = types.SimpleNamespace(**{**vars(modes), "output_names": ("ax", "ay", "dx")})
+    with pytest.raises(ValueError, match="'dx' is not a channel of the geometry"):
+        exchange.write_uff(tmp_path / "m.uff", bad, geo)
+    assert not (tmp_path / "m.uff").exists()
