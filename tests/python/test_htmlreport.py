@@ -144,7 +144,7 @@ def chromium(*args, timeout=120):
 def test_the_report_opens_without_script_errors_and_draws_in_time(big_report):
     path, a = big_report
     # offline: every host name unresolvable
-    out = chromium("--enable-logging=stderr", "--v=0", "--window-size=1200,2000", "--virtual-time-budget=15000",
+    out = chromium("--enable-logging=stderr", "--v=0", "--window-size=1200,2000", "--virtual-time-budget=30000",
                    "--host-resolver-rules=MAP * ~NOTFOUND", "--dump-dom", path.as_uri())
     errors = [ln for ln in out.stderr.splitlines() if "Uncaught" in ln or ("CONSOLE" in ln and "Error" in ln)]
     assert not errors, errors
@@ -162,7 +162,7 @@ def test_the_screenshot_shows_the_diagram_and_the_3d_shape(big_report, tmp_path)
 
     path, _ = big_report
     shot = tmp_path / "shot.png"
-    chromium(f"--screenshot={shot}", "--window-size=1200,2600", "--virtual-time-budget=15000", path.as_uri())
+    chromium(f"--screenshot={shot}", "--window-size=1200,2600", "--virtual-time-budget=30000", path.as_uri())
     img = np.asarray(Image.open(shot).convert("RGB")).astype(float)
     assert img.shape[:2] == (2600, 1200)
     assert img.std() > 20  # not blank: a blank page has std 0
