@@ -229,13 +229,23 @@ def plot(sweeps, path):
     for j, k in enumerate(keys):
         field, label = xkey[k]
         for tool, style in (("modaluq", "o-"), ("pyOMA2", "s--")):
-            pts = [(row["point"][field], row[tool]) for row in sweeps[k]
-                   if row.get(tool, {}).get("status") == "ok"]
-            if not pts:
-                continue
-            xs = [x for x, _ in pts]
-            axes[0, j].loglog(xs, [r["cpu"] for _, r in pts], style, label=tool)
-            axes[1, j].loglog(xs, [r["mem_mb"] for _, r in pts], style, label=tool)
+            ok = [row for row in sweeps[k] if row.get(tool, {}).get("status") == "ok"]
+            # points at the base's channel count form the line; others (10^7 samples at fewer
+            # channels) are separate, labelled markers
+            main = [(row["point"][field], row[tool]) for row in ok
+                    if k == "channels" or row["point"]["channels"] == BASE["channels"]]
+            other = [row for row in ok if k != "channels" and row["point"]["channels"] != BASE["channels"]]
+            if main:
+                xs = [x for x, _ in main]
+                axes[0, j].loglog(xs, [r["cpu"] for _, r in main], style, label=tool)
+                axes[1, j].loglog(xs, [r["mem_mb"] for _, r in main], style, label=tool)
+            for row in other:
+                x, r = row["point"][field], row[tool]
+                for i, v in ((0, r["cpu"]), (1, r["mem_mb"])):
+                    axes[i, j].loglog([x], [v], "D", color="C2",
+                                      label=f"{tool}, {row['point']['channels']} channels")
+                    axes[i, j].annotate(f"{row['point']['channels']} ch", (x, v), textcoords="offset points",
+                                        xytext=(-30, 4), fontsize=8)
         for i, what in enumerate(("CPU s (1 thread)", "peak MB added")):
             ax = axes[i, j]
             ax.set_ylabel(what)
