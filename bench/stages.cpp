@@ -40,9 +40,10 @@ static Eigen::MatrixXd signal(Index l, Index n, unsigned seed) {
     return y;
 }
 
-static void run(const char* name, Index l, Index n, Index p, Index nmax, Index nb, bool unc) {
+static void run(const char* name, Index l, Index n, Index p, Index nmax, Index nb, bool unc, Index n_refs = 0) {
     const Eigen::MatrixXd y = signal(l, n, 1);
     IdentifyOptions o;
+    for (Index j = 0; j < n_refs; ++j) o.references.push_back(j * (l - 1) / std::max<Index>(1, n_refs - 1));
     o.fs = 50;
     o.block_rows = p;
     for (Index k = 2; k <= nmax; k += 2) o.orders.push_back(k);
@@ -93,10 +94,12 @@ static void run(const char* name, Index l, Index n, Index p, Index nmax, Index n
                 t_orders, t_eig, t_all);
 }
 
-// Usage: stages [U3]   (U3 adds ~15 s and ~1 GB)
+// Usage: stages [U3|W1]   (U3 adds ~15 s and ~1 GB; W1, the wide array of bench/wide.py: 100
+// channels, 8 references, 360,000 samples, p = q = 40, orders to 200, ~20 s and ~1 GB)
 int main(int argc, char** argv) {
     run("S1", 3, 1000000, 40, 100, 50, false);
     run("U1", 3, 100000, 40, 100, 50, true);
     run("U2", 20, 100000, 20, 100, 50, true);
     if (argc > 1 && std::string(argv[1]) == "U3") run("U3", 20, 1000000, 40, 200, 100, true);
+    if (argc > 1 && std::string(argv[1]) == "W1") run("W1", 100, 360000, 40, 200, 50, true, 8);
 }

@@ -86,8 +86,10 @@ struct CovarianceAccumulatorState {
     /// Blocks k that meet the base times summed so far, [first_sample, max(first_sample, end_sample - L)),
     /// increasing; block_count holds how many of those base times each block has.
     IndexVector block_index, block_count;
-    /// ((L+1) d (d+1)) x blocks: column j is the column-major vec of block block_index[j]'s lag sums,
-    /// the ((L+1) d) x (d+1) matrix whose rows l d .. l d + d - 1 are [sum x_{t+l} x_t^T | sum x_{t+l}].
+    /// ((L+1) d (c+1)) x blocks: column j is the column-major vec of block block_index[j]'s lag sums,
+    /// the ((L+1) d) x (c+1) matrix whose rows l d .. l d + d - 1 are [sum x_{t+l} x_{t,cols}^T | sum x_{t+l}].
+    /// The columns are all d channels (c = d), or, output-only with references other than all
+    /// outputs in order, the r references in their order (c = r): R1 needs no other products.
     Eigen::MatrixXd block_sums;
     /// Boundaries b = k N_b in [first_sample, end_sample), increasing, and (d L) x boundaries: column j
     /// is the vec of the d x L shifted samples from window_start[j] (the first min(L, end_sample - b) are
@@ -127,6 +129,15 @@ public:
         detail::require(first_ >= 0, "first_sample must be >= 0, got ", first_);
         d_ = layout_.n_channels();
         lag_ = layout_.max_lag();
+        // Output-only with references: R1 needs the lag products with the reference channels
+        // only (d r per lag, not d^2): the sums keep those columns. Inputs need every column.
+        if (layout_.n_inputs == 0 && !layout_.references.empty()) {
+            bool identity = static_cast<Index>(layout_.references.size()) == d_;
+            for (size_t j = 0; identity && j < layout_.references.size(); ++j)
+                identity = layout_.references[j] == static_cast<Index>(j);
+            if (!identity) cols_ = layout_.references;
+        }
+        c_ = cols_.empty() ? d_ : static_cast<Index>(cols_.size());
         total_sum_ = Eigen::VectorXd::Zero(d_);
         shift_ = Eigen::VectorXd::Zero(d_);
         head_.resize(d_, 0);
@@ -151,7 +162,7 @@ public:
         s.total_sum = total_sum_;
         s.head = head_;
         s.tail = tail_;
-        const Index per_block = (lag_ + 1) * d_ * (d_ + 1), nb = static_cast<Index>(blocks_.size());
+        const Index per_block = (lag_ + 1) * d_ * (c_ + 1), nb = static_cast<Index>(blocks_.size());
         s.block_index.resize(nb);
         s.block_count.resize(nb);
         s.block_sums.resize(per_block, nb);
@@ -284,7 +295,7 @@ public:
     }
 
     /// Bytes of state held now. It grows with the number of blocks, not with the samples: per
-    /// block ((L+1) d (d+1) + d L) doubles, L = p + q - 1 and d = l + m (the lag sums and the
+    /// block ((L+1) d (c+1) + d L) doubles, L = p + q - 1, d = l + m, c = d or r (the lag sums and the
     /// samples after its boundary), so a record cut into n_b blocks holds about n_b times that
     /// whatever its length. Choose block_length from the expected record length to bound it.
     std::size_t state_bytes() const {
@@ -329,7 +340,7 @@ public:
             demean_ ? Eigen::VectorXd(shift_ + total_sum_ / count) : Eigen::VectorXd::Zero(d_);
 
         // Whole record: all time blocks, boundaries 0 and N (the pending tail).
-        Eigen::MatrixXd sums = Eigen::MatrixXd::Zero((lag_ + 1) * d_, d_ + 1);
+        Eigen::MatrixXd sums = Eigen::MatrixXd::Zero((lag_ + 1) * d_, c_ + 1);
         for (const auto& [k, blk] : blocks_) sums += blk.sums;
         Targets whole = make_targets(out);
         assemble(sums, window_at(0), tail_, static_cast<double>(n_cols), centre, whole);
@@ -354,7 +365,7 @@ public:
 
 private:
     struct BlockSums {
-        Eigen::MatrixXd sums;  ///< ((L+1) d) x (d+1): rows l*d.. = [sum x_{t+l} x_t^T | sum x_{t+l}]
+        Eigen::MatrixXd sums;  ///< ((L+1) d) x (c+1): rows l*d.. = [sum x_{t+l} x_{t,cols}^T | sum x_{t+l}]
         Index count = 0;       ///< base times summed
     };
     struct Window {
@@ -381,6 +392,16 @@ private:
     std::map<Index, Window> windows_;     // keyed by boundary sample b = k N_b
     Eigen::MatrixXd head_;                // first min(L, n) shifted samples
     Eigen::MatrixXd tail_;                // last min(L, n) shifted samples (pending base times)
+    detail::ColumnChannels cols_;         // column channels of the lag sums; empty = all d
+    Index c_ = 0;                         // their number
+
+    /// The entries of a d-vector at the column channels (the vector itself when all are).
+    Eigen::VectorXd columns(const Eigen::Ref<const Eigen::VectorXd>& v) const {
+        if (cols_.empty()) return v;
+        Eigen::VectorXd out(c_);
+        for (Index j = 0; j < c_; ++j) out(j) = v(cols_[static_cast<size_t>(j)]);
+        return out;
+    }
 
     /// Refuse a push holding a sample beyond kMaxSampleMagnitude, naming it (x is channels x
     /// samples, finite; its first sample is sample end_ of the stream).
@@ -438,7 +459,7 @@ private:
         require(s.block_index.size() == n_blocks && s.block_count.size() == n_blocks, "state: block_index and ",
                 "block_count have ", s.block_index.size(), " and ", s.block_count.size(), " entries, expected ",
                 n_blocks, " (the blocks of ", nb, " base times meeting [", first, ", ", t_end, "))");
-        shape("block_sums", s.block_sums.rows(), s.block_sums.cols(), (lag_ + 1) * d_ * (d_ + 1), n_blocks);
+        shape("block_sums", s.block_sums.rows(), s.block_sums.cols(), (lag_ + 1) * d_ * (c_ + 1), n_blocks);
         values("block_sums", s.block_sums, std::numeric_limits<double>::max());
         for (Index j = 0; j < n_blocks; ++j) {
             const Index k = k0 + j, count = std::min((k + 1) * nb, t_end) - std::max(k * nb, first);
@@ -463,7 +484,7 @@ private:
         head_ = s.head;
         tail_ = s.tail;
         for (Index j = 0; j < n_blocks; ++j) {
-            BlockSums blk{Eigen::Map<const Eigen::MatrixXd>(s.block_sums.col(j).data(), (lag_ + 1) * d_, d_ + 1),
+            BlockSums blk{Eigen::Map<const Eigen::MatrixXd>(s.block_sums.col(j).data(), (lag_ + 1) * d_, c_ + 1),
                           s.block_count(j)};
             blocks_.emplace_hint(blocks_.end(), s.block_index(j), std::move(blk));
         }
@@ -533,8 +554,8 @@ private:
             const Index k = t / block_length_;
             const Index stop = std::min(t_to, (k + 1) * block_length_);
             BlockSums& blk = blocks_[k];
-            if (blk.sums.size() == 0) blk.sums = Eigen::MatrixXd::Zero((lag_ + 1) * d_, d_ + 1);
-            detail::add_lag_sums(buf.data(), d_, lag_, t - buf_start, stop - t, blk.sums);
+            if (blk.sums.size() == 0) blk.sums = Eigen::MatrixXd::Zero((lag_ + 1) * d_, c_ + 1);
+            detail::add_lag_sums(buf.data(), d_, lag_, t - buf_start, stop - t, blk.sums, 0, cols_);
             blk.count += stop - t;
             t = stop;
         }
@@ -545,13 +566,14 @@ private:
         if (!has_shift_) return;
         const Eigen::VectorXd delta = shift_ - new_shift;
         if (delta.isZero(0.0)) return;
+        const Eigen::VectorXd delta_c = columns(delta);
         for (auto& [k, blk] : blocks_) {
             const double n = static_cast<double>(blk.count);
-            const Eigen::VectorXd m0 = blk.sums.block(0, d_, d_, 1);
+            const Eigen::VectorXd m0 = columns(blk.sums.block(0, c_, d_, 1));
             for (Index l = 0; l <= lag_; ++l) {
-                auto lam = blk.sums.block(l * d_, 0, d_, d_);
-                auto ml = blk.sums.block(l * d_, d_, d_, 1);
-                lam += ml * delta.transpose() + delta * m0.transpose() + n * delta * delta.transpose();
+                auto lam = blk.sums.block(l * d_, 0, d_, c_);
+                auto ml = blk.sums.block(l * d_, c_, d_, 1);
+                lam += ml * delta_c.transpose() + delta * m0.transpose() + n * delta * delta_c.transpose();
                 ml += n * delta;
             }
         }
@@ -588,9 +610,10 @@ private:
                   double n, const Eigen::VectorXd& centre, Targets& t) const {
         const Index l = layout_.n_outputs, m = layout_.n_inputs, q = layout_.q();
         const Index r = layout_.n_references();
-        Eigen::MatrixXd e0 = Eigen::MatrixXd::Zero((lag_ + 1) * d_, d_);
-        Eigen::MatrixXd e1 = Eigen::MatrixXd::Zero((lag_ + 1) * d_, d_);
-        Eigen::MatrixXd g(d_, d_);
+        Eigen::MatrixXd e0 = Eigen::MatrixXd::Zero((lag_ + 1) * d_, c_);
+        Eigen::MatrixXd e1 = Eigen::MatrixXd::Zero((lag_ + 1) * d_, c_);
+        Eigen::MatrixXd g(d_, c_);
+        const Eigen::VectorXd centre_c = columns(centre);
         for (Index s2 = 0; s2 <= lag_; ++s2) {
             // e0, e1 hold sum_{t in [b, b+s2)} x_{t+l} x_t^T for both boundaries.
             for (Index lg = 0; s2 + lg <= lag_; ++lg) {
@@ -598,16 +621,16 @@ private:
                 const bool past_future = s2 < q && s1 >= q;
                 const bool future_future = m > 0 && s2 >= q;
                 if (!past_future && !future_future) continue;
-                g = sums.block(lg * d_, 0, d_, d_) + e1.block(lg * d_, 0, d_, d_) -
-                    e0.block(lg * d_, 0, d_, d_);
-                const auto m1 = sums.block(s1 * d_, d_, d_, 1);  // sum_c x_{c+s1}
-                const auto m2 = sums.block(s2 * d_, d_, d_, 1);  // sum_c x_{c+s2}
-                g -= m1 * centre.transpose() + centre * m2.transpose() - n * centre * centre.transpose();
+                g = sums.block(lg * d_, 0, d_, c_) + e1.block(lg * d_, 0, d_, c_) -
+                    e0.block(lg * d_, 0, d_, c_);
+                const auto m1 = sums.block(s1 * d_, c_, d_, 1);                  // sum_c x_{c+s1}
+                const Eigen::VectorXd m2 = columns(sums.block(s2 * d_, c_, d_, 1));  // sum_c x_{c+s2}
+                g -= m1 * centre_c.transpose() + centre * m2.transpose() - n * centre * centre_c.transpose();
                 g /= n;
                 if (past_future) {
                     const Index i = s1 - q, j = s2;
                     for (Index jr = 0; jr < r; ++jr) {
-                        const Index ref = layout_.reference(jr);
+                        const Index ref = cols_.empty() ? layout_.reference(jr) : jr;  // column of g
                         t.R1.block(i * l, j * r + jr, l, 1) = g.block(0, ref, l, 1);
                         if (m > 0) t.R4.block(j * r + jr, i * m, 1, m) = g.block(l, ref, m, 1).transpose();
                     }
@@ -624,9 +647,9 @@ private:
             if (s2 < lag_) {
                 const Index len = (lag_ - s2) * d_;  // lags 0 .. L-s2-1 still needed
                 e0.topRows(len).noalias() +=
-                    Eigen::Map<const Eigen::VectorXd>(w0.data() + s2 * d_, len) * w0.col(s2).transpose();
+                    Eigen::Map<const Eigen::VectorXd>(w0.data() + s2 * d_, len) * columns(w0.col(s2)).transpose();
                 e1.topRows(len).noalias() +=
-                    Eigen::Map<const Eigen::VectorXd>(w1.data() + s2 * d_, len) * w1.col(s2).transpose();
+                    Eigen::Map<const Eigen::VectorXd>(w1.data() + s2 * d_, len) * columns(w1.col(s2)).transpose();
             }
         }
     }
