@@ -209,8 +209,9 @@ def estimate_cost(n_samples: int, n_outputs: int, n_inputs: int, *, block_rows: 
     about 2 ab + 3 s² + 2 (a + b) s beside them; the propagation T_R (E n_b) and T_H (ab n_b)
     at once, then T_H with 20 noise-floor draws of dH (20 ab) and the Q matrices of every block
     at n (2 n_b (2 n² + l n)); each order, per thread, 6 n_b n² + 4 l n_b n + 4 a n; the result
-    ~ 2 sum_n n ((2 + 2l)² + 6l + 12). The peak is the largest of these phases, plus the lag
-    sums (n_b + threads)(p + q + 1) d (d + 1), d = l + m. ``n_samples`` 0: from covariances
+    ~ sum_n n ((2 + 2l)² + 6l + 12) (n/2 poles per order, held twice). The peak is the largest of
+    these phases, plus the lag sums (n_b + threads)(p + q + 1) d (d + 1), d = l + m ((r + 1) for
+    d + 1 output-only). ``n_samples`` 0: from covariances
     (streaming), no covariance pass. Measured peaks are 0.5 to 1 times it (tests/python/
     test_faults_resources.py).
     """
@@ -226,13 +227,16 @@ def estimate_cost(n_samples: int, n_outputs: int, n_inputs: int, *, block_rows: 
     t = max(1, int(threads))
     E = a * b + a * c + c * c + b * c
     d = l + m
-    lag_sums = (nb + t) * (p + q + 1) * d * (d + 1) if n_samples else 0
+    # output-only with references: the lag products keep the reference columns only (lag_sums.hpp)
+    lag_columns = (r if m == 0 else d) + 1
+    lag_sums = (nb + t) * (p + q + 1) * d * lag_columns if n_samples else 0
     svd = 2 * a * b + 3 * s * s + 2 * (a + b) * s
     realization = 2 * (a + b) * s + 2 * a * n
     block_q = 2 * nb * (2 * n * n + l * n)
     per_order = t * (6 * nb * n * n + 4 * l * nb * n + 4 * a * n) if nb else t * 4 * a * n
     shape = (2 + 2 * l) ** 2 + 6 * l + 12 if nb else 2 * l + 6
-    result = 2 * sum(min(o, n) for o in order_list) * shape
+    # about n/2 poles at order n (complex pairs), held twice (the core's Identification, Python's Modes)
+    result = sum(min(o, n) for o in order_list) * shape
     phases = {
         "covariances": lag_sums + E * (1 + nb) + E,
         "svd": E * (1 + nb) + E + a * b + svd,
