@@ -209,7 +209,7 @@ def estimate_cost(n_samples: int, n_outputs: int, n_inputs: int, *, block_rows: 
     about 2 ab + 3 s² + 2 (a + b) s beside them; the propagation T_R (E n_b) and T_H (ab n_b)
     at once, then T_H with 20 noise-floor draws of dH (20 ab) and the Q matrices of every block
     at n (2 n_b (2 n² + l n)); each order, per thread, 6 n_b n² + 4 l n_b n + 4 a n; the result
-    ~ sum_n n ((2 + 2l)² + 6l + 12) (n/2 poles per order, held twice). The peak is the largest of
+    ~ sum_n n ((2 + 2l)² + 6l + 12) (n/2 poles per order, held once). The peak is the largest of
     these phases, plus the lag sums (n_b + threads)(p + q + 1) d (d + 1), d = l + m ((r + 1) for
     d + 1 output-only). ``n_samples`` 0: from covariances
     (streaming), no covariance pass. Measured peaks are 0.5 to 1 times it (tests/python/
@@ -235,8 +235,8 @@ def estimate_cost(n_samples: int, n_outputs: int, n_inputs: int, *, block_rows: 
     block_q = 2 * nb * (2 * n * n + l * n)
     per_order = t * (6 * nb * n * n + 4 * l * nb * n + 4 * a * n) if nb else t * 4 * a * n
     shape = (2 + 2 * l) ** 2 + 6 * l + 12 if nb else 2 * l + 6
-    # about n/2 poles at order n (complex pairs), held twice (the core's Identification, Python's Modes)
-    result = sum(min(o, n) for o in order_list) * shape
+    # about n/2 poles at order n (complex pairs), held once: Python's Modes view the core's arrays
+    result = sum(min(o, n) for o in order_list) * shape // 2
     phases = {
         "covariances": lag_sums + E * (1 + nb) + E,
         "svd": E * (1 + nb) + E + a * b + svd,
