@@ -24,7 +24,7 @@ The wing's names here (``monitor``, ``Monitoring``, ``load_tracks``, ``simulate_
 from ._core import NumericalError
 from .analysis import Analysis
 from .horizons import HorizonCheck, check_horizons
-from .identification import identify
+from .identification import identify, identify_setups
 from .results import ModalUQWarning, Modes, Result
 from .selection import SelectedModes, select_modes
 from .settings import ClusteringSettings, PoleStatus, Settings, StabilityCriteria
@@ -52,6 +52,7 @@ __all__ = [
     "TrackingSettings",
     "check_horizons",
     "identify",
+    "identify_setups",
     "load_tracks",
     "modal_assurance_criterion",
     "monitor",
