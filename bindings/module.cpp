@@ -37,4 +37,5 @@ PYBIND11_MODULE(_core, m) {
     modaluq::python::bind_identify(m);
     modaluq::python::bind_stabilization(m);
     modaluq::python::bind_indicators(m);
+    modaluq::python::bind_multisetup(m);
 }

@@ -25,7 +25,7 @@ from ._core import NumericalError
 from .analysis import Analysis
 from .geometry import Geometry
 from .horizons import HorizonCheck, check_horizons
-from .identification import identify
+from .identification import identify, identify_setups
 from .results import ModalUQWarning, Modes, Result
 from .selection import SelectedModes, select_modes
 from .settings import ClusteringSettings, PoleStatus, Settings, StabilityCriteria
@@ -54,6 +54,7 @@ __all__ = [
     "TrackingSettings",
     "check_horizons",
     "identify",
+    "identify_setups",
     "load_tracks",
     "modal_assurance_criterion",
     "monitor",

@@ -8,7 +8,7 @@ import collections.abc
 import numpy
 import numpy.typing
 import typing
-__all__: list[str] = ['ClusteringOptions', 'CovarianceAccumulator', 'CovarianceAccumulatorState', 'Covariances', 'Diagram', 'DropReason', 'HankelLayout', 'Identification', 'IdentificationWarning', 'IdentifyOptions', 'IndicatorStatistics', 'Linkage', 'Modes', 'NumericalError', 'PoleStatus', 'Poles', 'SelectedModes', 'SlowDecay', 'StabilityCriteria', 'cluster_labels', 'compute_covariances', 'identify', 'identify_covariances', 'mean_phase_deviation', 'modal_assurance', 'modal_assurance_criterion', 'modal_assurance_statistics', 'modal_phase_collinearity', 'modal_phase_collinearity_statistics', 'poles_of', 'select_modes', 'stabilization_diagram', 'uses_blas']
+__all__: list[str] = ['ClusteringOptions', 'CovarianceAccumulator', 'CovarianceAccumulatorState', 'Covariances', 'Diagram', 'DropReason', 'HankelLayout', 'Identification', 'IdentificationWarning', 'IdentifyOptions', 'IndicatorStatistics', 'Linkage', 'Modes', 'NumericalError', 'PoleStatus', 'Poles', 'SelectedModes', 'SetupData', 'SetupsIdentification', 'SlowDecay', 'StabilityCriteria', 'cluster_labels', 'compute_covariances', 'identify', 'identify_covariances', 'identify_setups', 'mean_phase_deviation', 'modal_assurance', 'modal_assurance_criterion', 'modal_assurance_statistics', 'modal_phase_collinearity', 'modal_phase_collinearity_statistics', 'poles_of', 'select_modes', 'stabilization_diagram', 'uses_blas']
 class NumericalError(ArithmeticError):
     pass
 class HankelLayout:
@@ -1025,6 +1025,34 @@ class IndicatorStatistics:
     @property
     def value(self) -> float:
         ...
+class SetupData:
+    def __init__(self, covariances: Covariances, references: collections.abc.Sequence[typing.SupportsInt | typing.SupportsIndex], fs: typing.SupportsFloat | typing.SupportsIndex = 0.0) -> None:
+        ...
+    @property
+    def covariances(self) -> Covariances:
+        ...
+    @property
+    def fs(self) -> float:
+        ...
+    @property
+    def references(self) -> list[int]:
+        ...
+class SetupsIdentification(Identification):
+    @property
+    def dof_channel(self) -> list[int]:
+        ...
+    @property
+    def dof_setup(self) -> list[int]:
+        ...
+    @property
+    def setup_n_blocks(self) -> list[int]:
+        ...
+    @property
+    def setup_signal_to_noise(self) -> list[float]:
+        ...
+    @property
+    def setup_singular_values(self) -> list[typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 1]"]]:
+        ...
 def _data_pointer(x: typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, n]", "flags.f_contiguous"]) -> int:
     ...
 def cluster_labels(distances: typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, n]", "flags.f_contiguous"], linkage: Linkage, threshold: typing.SupportsFloat | typing.SupportsIndex) -> typing.Annotated[numpy.typing.NDArray[numpy.int64], "[m, 1]"]:
@@ -1034,6 +1062,8 @@ def compute_covariances(y_t: typing.Annotated[numpy.typing.NDArray[numpy.float64
 def identify(y_t: typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, n]", "flags.f_contiguous"], u_t: typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, n]", "flags.f_contiguous"], options: IdentifyOptions) -> Identification:
     ...
 def identify_covariances(covariances: Covariances, options: IdentifyOptions) -> Identification:
+    ...
+def identify_setups(setups: collections.abc.Sequence[SetupData], options: IdentifyOptions) -> SetupsIdentification:
     ...
 def mean_phase_deviation(shape: typing.Annotated[numpy.typing.ArrayLike, numpy.complex128, "[m, 1]"], cov: typing.Annotated[numpy.typing.ArrayLike, numpy.float64, "[m, n]"] = ...) -> IndicatorStatistics:
     ...

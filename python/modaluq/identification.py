@@ -27,7 +27,7 @@ from .preprocess import preprocess
 from .results import Result, result_from_core, warn_all
 from .settings import Settings
 
-__all__ = ["identify", "identify_quietly", "make_settings"]
+__all__ = ["identify", "identify_quietly", "identify_setups", "make_settings"]
 
 
 def make_settings(settings: Settings | None, keywords: dict, *, function: str = "identify") -> Settings:
@@ -203,3 +203,129 @@ def _output_names(output_names, y) -> tuple:
         return tuple(str(n) for n in output_names)
     columns = getattr(y, "columns", None)
     return tuple(str(c) for c in columns) if columns is not None and getattr(y, "ndim", 0) == 2 else ()
+
+
+def identify_setups(setups, *, fs, references: Sequence[str], inputs: Sequence[str] | None = None,
+                    settings: Settings | None = None, **keywords) -> Result:
+    """Identify a campaign measured in several setups, merged into global mode shapes with their σ.
+
+    The modular merge of Döhler & Mevel (2012) with the first-order covariance of Döhler, Lam &
+    Mevel (2013), docs/uq-math.md §13: each setup's subspace is brought into the first setup's
+    state basis through the reference channels, one global model is identified at every order,
+    and each setup's block covariance is propagated (the setups are independent records) to f,
+    ξ and the global shape. The result is a :class:`Result` like :func:`identify`'s: its
+    stabilization diagram and ``select_modes()`` work unchanged, with ``output_names`` the
+    global DOFs (the references once, then each setup's other channels in setup and column
+    order). The propagation is the unfrozen first-order one (``freeze_noise`` is not used).
+
+    Parameters
+    ----------
+    setups : sequence of pandas.DataFrame
+        One record per setup, shape (n_samples_j, n_channels_j), columns the channel names.
+        Records may have different lengths and channels; the references must be in every one.
+    fs : float or sequence of float
+        Sampling frequency in Hz, the same for every setup (a sequence is checked to be constant).
+    references : sequence of str
+        Names of the reference channels, measured in every setup (the past channels of each).
+    inputs : sequence of str, optional
+        Names of measured-input columns (input/output); in each setup the columns with these
+        names are its inputs (a setup may have none: it is then output-only).
+    settings, **keywords
+        As for :func:`identify`: ``block_rows``, ``past_block_rows``, ``orders``, ``n_blocks``
+        (per setup), ``uncertainty``, ``input_rcond``, ``threads`` and the preprocessing
+        keywords (``frequency_range``, ``decimate``, ...), applied to every setup alike.
+        Orders are bounded by min(p r, q r, (p-1) l_g) with r references and l_g global DOFs.
+
+    Raises
+    ------
+    ValueError
+        A reference missing from a setup, different sampling frequencies, a channel (not a
+        reference) measured in two setups, a setup without outputs, or settings the merge
+        cannot use.
+    """
+    setups = list(setups)
+    if not setups:
+        raise ValueError("setups must hold at least one record")
+    fss = np.atleast_1d(np.asarray(fs, dtype=float))
+    if fss.size not in (1, len(setups)):
+        raise ValueError(f"fs must be one rate or one per setup ({len(setups)}); got {fss.size}")
+    if np.any(fss != fss[0]):
+        k = int(np.flatnonzero(fss != fss[0])[0])
+        raise ValueError(f"setup {k} has fs = {fss[k]} Hz but setup 0 has {fss[0]} Hz: "
+                         "every setup must be sampled at the same rate (resample first)")
+    fs = check_sampling_frequency(float(fss[0]))
+    if isinstance(references, str):
+        raise TypeError("references must be a sequence of channel names, not a single string")
+    refs = [str(r) for r in references]
+    if not refs:
+        raise ValueError("references must name at least one reference channel")
+    if len(set(refs)) != len(refs):
+        raise ValueError(f"references has a repeated name: {refs}")
+    input_names = set() if inputs is None else {str(n) for n in inputs}
+    if input_names & set(refs):
+        raise ValueError(f"references and inputs share {sorted(input_names & set(refs))}")
+    s = make_settings(settings, keywords, function="identify_setups")
+    if s.references is not None:
+        raise TypeError("identify_setups takes the references by name (references=[...]), not as Settings.references")
+
+    records, dof_names, seen = [], list(refs), {}
+    for j, rec in enumerate(setups):
+        columns = getattr(rec, "columns", None)
+        if columns is None:
+            raise TypeError(f"setups[{j}] must be a pandas.DataFrame whose columns are channel names; "
+                            f"got {type(rec).__name__}")
+        names = [str(c) for c in columns]
+        missing = [r for r in refs if r not in names]
+        if missing:
+            raise ValueError(f"setup {j} lacks the reference channel(s) {missing} (its channels: {names})")
+        outs = [c for c in names if c not in input_names]
+        ins = [c for c in names if c in input_names]
+        moving = [c for c in outs if c not in refs]
+        for c in moving:
+            if c in seen:
+                raise ValueError(f"channel {c!r} is measured in setups {seen[c]} and {j} but is not a reference: "
+                                 "declare it in references or rename one")
+            seen[c] = j
+        dof_names += moving
+        # references first (the past channels, in the global order), then the moving channels
+        y = as_samples(rec[refs + moving].to_numpy(dtype=float), f"setups[{j}]")
+        u = as_samples(rec[ins].to_numpy(dtype=float), f"setups[{j}] inputs") if ins else None
+        records.append((y, u, len(moving)))
+
+    rate, band = fs, None
+    if s.preprocessing:
+        pre = [preprocess(y, u, fs=fs, **s.preprocessing) for y, u, _ in records]
+        records = [(p.y, p.u, w) for p, (_, _, w) in zip(pre, records)]
+        rate, band = pre[0].fs, pre[0].frequency_range
+    r = len(refs)
+    l_g = len(dof_names)
+    if s.block_rows is None or s.orders is None or s.n_blocks is None:
+        shortest = min(y.shape[0] for y, _, _ in records)
+        widest = max(y.shape[1] for y, _, _ in records)
+        chosen = choose_settings(shortest, rate, widest, frequency_range=band, n_references=r,
+                                 block_rows=s.block_rows, orders=s.orders, n_blocks=s.n_blocks,
+                                 n_inputs=max((0 if u is None else u.shape[1]) for _, u, _ in records),
+                                 uncertainty=s.uncertainty, threads=s.threads)
+        s = s.replace(block_rows=chosen.block_rows, orders=chosen.orders, n_blocks=chosen.n_blocks)
+    o = s.to_core(rate)
+    core_setups = []
+    for y, u, _ in records:
+        lay = s.layout(y.shape[1], 0 if u is None else u.shape[1])
+        lay.references = list(range(r))
+        u_t = np.empty((0, y.shape[0])) if u is None else np.ascontiguousarray(u.T)
+        with single_threaded_blas():
+            cov = _core.compute_covariances(y.T, u_t, lay, s.n_blocks if s.uncertainty else 1, s.demean,
+                                            s.uncertainty, s.threads)
+        core_setups.append(_core.SetupData(cov, list(range(r)), rate))
+    with single_threaded_blas(), naming_settings_on_memory_error(s):
+        ident = _core.identify_setups(core_setups, o)
+    record = s.record(rate, l_g)
+    record["references"] = list(range(r))
+    record["reference_names"] = refs
+    record["setups"] = [{"n_samples": int(y.shape[0]), "n_outputs": int(y.shape[1]),
+                         "n_inputs": 0 if u is None else int(u.shape[1])} for y, u, _ in records]
+    record["frequency_range"] = None if band is None else list(band)
+    n_in = max((0 if u is None else u.shape[1]) for _, u, _ in records)
+    result = result_from_core(ident, record, l_g, n_in, output_names=dof_names)
+    warn_all(result)
+    return result

@@ -9,6 +9,7 @@
 #include "indicators.hpp"
 #include "layout.hpp"
 #include "modal.hpp"
+#include "multisetup.hpp"
 #include "realization.hpp"
 #include "selection.hpp"
 #include "stabilization.hpp"

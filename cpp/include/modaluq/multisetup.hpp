@@ -1,0 +1,464 @@
+#pragma once
+/// @file multisetup.hpp
+/// Campaigns in several setups (issue 23): the modular merge of Doehler & Mevel (IEEE TAC 2012)
+/// with the first-order covariance of Doehler, Lam & Mevel (MSSP 2013), output-only and
+/// input/output, at every order of a stabilization diagram (docs/uq-math.md §13).
+///
+/// Each setup brings its own covariances (its channels, its inputs, its record length and
+/// blocks); a few reference channels are common to all setups and are each setup's past
+/// channels. Per setup: H, T_H, one SVD at n_max and the per-block dGamma (5.3)-(5.7), exactly as
+/// for one record. Per order n: every setup's Gamma is brought into setup 0's state basis
+/// through the reference rows (12.3), the global Gamma_g stacks the references once and every
+/// setup's other ("moving") rows (12.4), and (A, C) and the modes follow as for one record
+/// with l_g global outputs. The setups are independent records, so the covariance factor of a
+/// global mode is the concatenation of each setup's block columns (12.7): memory and time are
+/// linear in the number of setups.
+///
+/// The propagation is the unfrozen first-order one (every singular direction of every setup
+/// free to rotate): it is the reference for a merge (§13.4, the noise-floor freezing of §5.5 is
+/// not validated above the true order for merged noise columns). IdentifyOptions::freeze_noise
+/// and the noise_* settings are therefore not used here; Modes::noise_coupling is 1 and
+/// Modes::singular_value_gap NaN (no single H).
+
+#include <Eigen/Core>
+#include <Eigen/Cholesky>
+#include <Eigen/QR>
+
+#include <algorithm>
+#include <cmath>
+#include <complex>
+#include <limits>
+#include <sstream>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "covariance.hpp"
+#include "detail/eigen_perturbation.hpp"
+#include "detail/gemm.hpp"
+#include "detail/parallel.hpp"
+#include "detail/svd_perturbation.hpp"
+#include "identify.hpp"
+#include "modal.hpp"
+#include "realization.hpp"
+#include "subspace.hpp"
+
+namespace modaluq {
+
+/// One setup of a campaign.
+struct SetupData {
+    /// R1..R4 of this setup and, with uncertainty, its blocks (>= 2), e.g. from
+    /// compute_covariances or a CovarianceAccumulator. Its layout's references (past channels)
+    /// must be `references`; its p and q those of the campaign.
+    Covariances covariances;
+    /// Output indices (in this setup) of the r common reference channels, in the same global
+    /// order in every setup. Every other output of the setup is a moving channel.
+    std::vector<Index> references;
+    /// This setup's sampling frequency in Hz; 0 = the campaign's (IdentifyOptions::fs). Any
+    /// other value must equal it.
+    double fs = 0.0;
+};
+
+/// A merged identification: the modes at every order over the l_g global DOFs (the references
+/// once, as measured in setup 0, then each setup's moving channels in setup and column order),
+/// with their covariance exactly as for one record, so poles_of, stabilization_diagram and
+/// select_modes take it unchanged. Fields of Identification that belong to one H are those of
+/// the basis setup 0 (singular_values, channel_mean) or the most cautious over the setups
+/// (numerical_rank, signal_to_noise: the smallest); n_samples, n_columns and n_blocks are sums.
+struct SetupsIdentification : Identification {
+    std::vector<Index> dof_setup;    ///< per global DOF, the setup it is measured in (references: 0)
+    std::vector<Index> dof_channel;  ///< per global DOF, its output index in that setup
+    std::vector<Eigen::VectorXd> setup_singular_values;  ///< per setup, the singular values of its H
+    std::vector<Index> setup_n_blocks;                   ///< per setup, its blocks (factor columns)
+    std::vector<double> setup_signal_to_noise;           ///< per setup, s_1 / std(s_1) (NaN without uncertainty)
+};
+
+namespace detail {
+
+/// One setup after its SVD: Gamma at n_max split into reference rows X and moving rows M (rows
+/// ordered block row by block row, i w + c), and the same rows of dGamma for every block
+/// (columns k n_max .. k n_max + n_max - 1 are block k's).
+struct SetupGamma {
+    Index l = 0, r = 0, w = 0, nb = 0, n_max = 0;
+    std::vector<Index> moving;
+    Eigen::MatrixXd x, m;    ///< p r x n_max, p w x n_max
+    Eigen::MatrixXd dx, dm;  ///< p r x (n_max nb), p w x (n_max nb)
+};
+
+/// Row i w + c of the result is row i l + rows[c] of g (block rows of l rows).
+inline Eigen::MatrixXd block_rows_of(const Eigen::Ref<const Eigen::MatrixXd>& g, Index l,
+                                     const std::vector<Index>& rows) {
+    const Index p = g.rows() / l, w = static_cast<Index>(rows.size());
+    Eigen::MatrixXd out(p * w, g.cols());
+    for (Index i = 0; i < p; ++i)
+        for (Index c = 0; c < w; ++c) out.row(i * w + c) = g.row(i * l + rows[c]);
+    return out;
+}
+
+/// dGamma = D S^{1/2} + U_n diag(d s_j / (2 sqrt s_j)), D = U Omega + dH V_n S^-1 (5.3)-(5.7),
+/// every direction free (unfrozen); d s_1 in `ds1`.
+inline Eigen::MatrixXd gamma_perturbation_unfrozen(const Realization& re, const Eigen::Ref<const Eigen::MatrixXd>& dh,
+                                                   Index n, double& ds1) {
+    const Eigen::VectorXd& s = re.singular_values();
+    const SvdPerturbation sp = svd_perturbation(re.U(), re.V(), s, dh, n, n);
+    ds1 = sp.Ua(0, 0);
+    const Eigen::VectorXd sq = s.head(n).cwiseSqrt();
+    Eigen::MatrixXd d(re.U().rows(), n);
+    gemm(d, re.U(), Op::N, sp.omega, Op::N);
+    d += sp.P.leftCols(n) * s.head(n).cwiseInverse().asDiagonal();
+    const Eigen::VectorXd e = sp.Ua.diagonal().head(n).cwiseQuotient(2.0 * sq);
+    return d * sq.asDiagonal() + re.U().leftCols(n) * e.asDiagonal();
+}
+
+/// Group sums of the Q matrices of §13.3 for one group (rows p w, up = all but the last block
+/// row, dw = all but the first): Q1 += G_up^T dG_up, Q2 += G_dw^T dG_up, Q3 += G_up^T dG_dw.
+inline void add_group_q(const Eigen::Ref<const Eigen::MatrixXd>& g, const Eigen::Ref<const Eigen::MatrixXd>& dg,
+                        Index w, Eigen::MatrixXd& q1, Eigen::MatrixXd& q2, Eigen::MatrixXd& q3) {
+    const Index rows = g.rows() - w;
+    if (rows <= 0) return;
+    gemm(q1, g.topRows(rows), Op::T, dg.topRows(rows), Op::N, 1.0, 1.0);
+    gemm(q2, g.bottomRows(rows), Op::T, dg.topRows(rows), Op::N, 1.0, 1.0);
+    gemm(q3, g.topRows(rows), Op::T, dg.bottomRows(rows), Op::N, 1.0, 1.0);
+}
+
+}  // namespace detail
+
+/// Identify a campaign of setups by the modular merge (docs/uq-math.md §13.2-13.3).
+///
+/// Uses from `options`: fs, block_rows, past_block_rows (each setup's covariances must have
+/// them), orders, uncertainty, input_rcond, threads. The references, blocks and demeaning are
+/// each setup's (in its covariances); freeze_noise and the noise_* settings are not used (the
+/// propagation is unfrozen, see the file comment).
+///
+/// Throws invalid_argument for: no setups; a setup whose number of references differs from
+/// setup 0's, whose references are out of range, repeated, or not its covariances' past
+/// channels; a sampling frequency or horizons that differ from the campaign's; an order above
+/// min(p r, q r, (p - 1) l_g, min(p l_j, q r)) (the reference rows must determine the state
+/// basis: p r >= n); uncertainty with fewer than two blocks in a setup.
+inline SetupsIdentification identify_setups(const std::vector<SetupData>& setups, IdentifyOptions options) {
+    using detail::gemm;
+    using detail::Op;
+    using detail::cd;
+    options.validate();
+    detail::require(!setups.empty(), "setups must hold at least one setup");
+    std::sort(options.orders.begin(), options.orders.end());
+    options.orders.erase(std::unique(options.orders.begin(), options.orders.end()), options.orders.end());
+    const Index ns = static_cast<Index>(setups.size());
+    const Index p = options.block_rows, q = options.past_block_rows > 0 ? options.past_block_rows : p;
+    const Index r = static_cast<Index>(setups[0].references.size());
+    detail::require(r >= 1, "setup 0: references must name at least one reference channel");
+    const bool unc = options.uncertainty;
+
+    // Layout (12.1) and checks.
+    SetupsIdentification out;
+    Index l_g = r;
+    for (Index j = 0; j < ns; ++j) {
+        const SetupData& s = setups[j];
+        const HankelLayout& L = s.covariances.layout;
+        detail::require(s.fs == 0.0 || s.fs == options.fs, "setup ", j, ": fs = ", s.fs,
+                        " Hz differs from the campaign's fs = ", options.fs, " Hz (all setups must share one rate)");
+        detail::require(static_cast<Index>(s.references.size()) == r, "setup ", j, " has ", s.references.size(),
+                        " references, setup 0 has ", r, ": every setup must measure the same reference channels");
+        for (Index c = 0; c < r; ++c) {
+            const Index ref = s.references[c];
+            detail::require(ref >= 0 && ref < L.n_outputs, "setup ", j, ": reference ", c, " is output ", ref,
+                            ", out of range for its ", L.n_outputs, " outputs (the setup lacks this reference)");
+            for (Index d = 0; d < c; ++d)
+                detail::require(s.references[d] != ref, "setup ", j, ": output ", ref, " is given as references ",
+                                d, " and ", c);
+        }
+        detail::require(L.n_references() == r, "setup ", j, ": its covariances have ", L.n_references(),
+                        " past channels (layout.references) but ", r, " references were given; the references must "
+                        "be the past channels");
+        for (Index c = 0; c < r; ++c)
+            detail::require(L.reference(c) == s.references[c], "setup ", j, ": past channel ", c, " of its covariances is output ",
+                            L.reference(c), " but reference ", c, " is output ", s.references[c],
+                            "; the references must be the past channels, in the same order");
+        detail::require(L.p() == p && L.q() == q, "setup ", j, ": its covariances have block_rows = ", L.p(),
+                        ", past_block_rows = ", L.q(), " but the campaign has ", p, ", ", q);
+        if (unc)
+            detail::require(s.covariances.blocks.cols() >= 2, "setup ", j, ": n_blocks must be >= 2 for the uncertainty, ",
+                            "its covariances have ", s.covariances.blocks.cols(), " complete blocks");
+        l_g += L.n_outputs - r;
+    }
+    const Index n_max = options.orders.back();
+    Index limit = std::min({p * r, q * r, (p - 1) * l_g});
+    for (const SetupData& s : setups) limit = std::min(limit, s.covariances.layout.max_order());
+    detail::require(n_max <= limit, "order ", n_max, " is above what the merge supports: min(block_rows * n_references, "
+                    "past_block_rows * n_references, (block_rows - 1) * n_global_dofs, each setup's max order) = ",
+                    limit, " (the reference rows must determine the state: use more block_rows or references)");
+
+    // Per setup: H, T_H, SVD at n_max, Gamma and dGamma split into reference and moving rows.
+    std::vector<detail::SetupGamma> sg(ns);
+    Index n_real = n_max;  // the largest order every setup realises (numerical rank)
+    Index min_block = std::numeric_limits<Index>::max();
+    out.numerical_rank = std::numeric_limits<Index>::max();
+    out.signal_to_noise = std::numeric_limits<double>::infinity();
+    for (Index j = 0; j < ns; ++j) {
+        const SetupData& s = setups[j];
+        const Covariances& cov = s.covariances;
+        const HankelLayout& L = cov.layout;
+        detail::SetupGamma& g = sg[j];
+        g.l = L.n_outputs;
+        g.r = r;
+        for (Index c = 0; c < g.l; ++c)
+            if (std::find(s.references.begin(), s.references.end(), c) == s.references.end()) g.moving.push_back(c);
+        g.w = static_cast<Index>(g.moving.size());
+        for (Index c : g.moving) {
+            out.dof_setup.push_back(j);
+            out.dof_channel.push_back(c);
+        }
+        const SubspaceMatrix sub = subspace_matrix(cov, options.input_rcond);
+        detail::require(cov.R1.allFinite() && sub.H.allFinite(), "setup ", j,
+                        ": the covariances are not finite (rescale the data)");
+        detail::require(sub.H.norm() > detail::kNumericallyZero * cov.R1.norm(), "setup ", j,
+                        ": the subspace matrix H is numerically zero (no dynamics left to identify)");
+        const Realization re(sub.H, g.l, n_max);
+        out.setup_singular_values.push_back(re.singular_values());
+        out.numerical_rank = std::min(out.numerical_rank, re.numerical_rank());
+        n_real = std::min(n_real, re.max_order());
+        g.n_max = re.max_order();
+        if (j == 0) {
+            out.singular_values = re.singular_values();
+            out.channel_mean = cov.channel_mean;
+            if (cov.has_inputs()) {
+                out.input_rank = sub.input_rank;
+                out.input_condition = sub.input_condition;
+            }
+        }
+        if (cov.has_inputs() && sub.input_rank_deficient) out.input_rank_deficient = true;
+        out.n_samples += cov.n_samples;
+        out.n_columns += cov.n_columns;
+        const Eigen::MatrixXd& gam = re.observability();
+        g.x = detail::block_rows_of(gam, g.l, s.references);
+        g.m = detail::block_rows_of(gam, g.l, g.moving);
+        double snr = std::numeric_limits<double>::quiet_NaN();
+        if (unc && g.n_max > 0) {
+            const Eigen::MatrixXd t_h = propagate_to_subspace(sub, cov, cov.covariance_factor());
+            const Index a = L.rows_future(), b = L.rows_past(), nm = g.n_max;
+            g.nb = t_h.cols();
+            g.dx.resize(p * r, nm * g.nb);
+            g.dm.resize(p * g.w, nm * g.nb);
+            Eigen::VectorXd ds1(g.nb);
+            detail::parallel_for(g.nb, options.threads, [&](Index k) {
+                Eigen::Map<const Eigen::MatrixXd> dh(t_h.col(k).data(), a, b);
+                const Eigen::MatrixXd dg = detail::gamma_perturbation_unfrozen(re, dh, nm, ds1(k));
+                g.dx.middleCols(k * nm, nm) = detail::block_rows_of(dg, g.l, s.references);
+                g.dm.middleCols(k * nm, nm) = detail::block_rows_of(dg, g.l, g.moving);
+            });
+            snr = re.singular_values()(0) / ds1.norm();
+            out.n_blocks += g.nb;
+            min_block = std::min(min_block, cov.block_length);
+        }
+        out.setup_signal_to_noise.push_back(snr);
+        out.setup_n_blocks.push_back(g.nb);
+        if (unc) out.signal_to_noise = std::min(out.signal_to_noise, snr);
+    }
+    // Global DOFs: references first (setup 0's channels), then the moving ones gathered above.
+    {
+        std::vector<Index> ds(r, 0), dc(setups[0].references.begin(), setups[0].references.end());
+        ds.insert(ds.end(), out.dof_setup.begin(), out.dof_setup.end());
+        dc.insert(dc.end(), out.dof_channel.begin(), out.dof_channel.end());
+        out.dof_setup = std::move(ds);
+        out.dof_channel = std::move(dc);
+    }
+    if (!unc) out.signal_to_noise = std::numeric_limits<double>::quiet_NaN();
+    const double block_seconds = unc ? static_cast<double>(min_block) / options.fs : 0.0;
+    out.block_length = unc ? min_block : 0;
+    if (unc) {
+        out.too_few_blocks = out.n_blocks - ns < 2 + 2 * l_g;
+        if (out.too_few_blocks)
+            out.warn(IdentificationWarning::too_few_blocks, detail::concat(
+                "the setups have ", out.n_blocks, " blocks in all, too few for the joint covariance of the ", 2 + 2 * l_g,
+                " parameters of a global mode (sum of n_blocks - 1 over the setups must be >= ", 2 + 2 * l_g,
+                "); the standard deviations of f and xi alone are still estimated"));
+        out.low_signal_to_noise = out.signal_to_noise < detail::kMinSignalToNoise;
+        if (out.low_signal_to_noise)
+            out.warn(IdentificationWarning::low_signal_to_noise, detail::concat(
+                "the subspace matrix H of a setup is at the level of its own estimation noise (s_1 is ",
+                out.signal_to_noise, " standard deviations from zero): the modes cannot be told from noise there"));
+    }
+    if (out.input_rank_deficient)
+        out.warn(IdentificationWarning::input_rank_deficient,
+                 "the input covariance R3 of a setup is rank deficient: its inputs are constant, duplicated or not "
+                 "exciting enough; the uncertainty is not reliable");
+
+    // Block columns of the concatenated factor: setup j's blocks start at col0[j].
+    std::vector<Index> col0(ns + 1, 0);
+    for (Index j = 0; j < ns; ++j) col0[j + 1] = col0[j] + sg[j].nb;
+    const Index nb_total = col0[ns];
+    // Row offset of each group in C (l_g rows): references, then the moving rows of each setup.
+    std::vector<Index> c0(ns + 1, r);
+    for (Index j = 0; j < ns; ++j) c0[j + 1] = c0[j] + sg[j].w;
+
+    const Index n_orders = static_cast<Index>(options.orders.size());
+    out.modes.resize(n_orders);
+    for (Index oi = 0; oi < n_orders; ++oi) {
+        const Index n = options.orders[oi];
+        Modes modes = detail::degenerate_modes(n, l_g, unc);
+        if (n > n_real) {
+            modes.note = detail::concat("order ", n, " is above the numerical rank of a setup's H (", n_real, ")");
+            out.modes[oi] = std::move(modes);
+            continue;
+        }
+        try {
+            // The merge (12.3)-(12.4).
+            const Eigen::MatrixXd B = sg[0].x.leftCols(n);
+            std::vector<Eigen::MatrixXd> T(ns), E(ns), Xp(ns), Wj(ns), G(ns);  // G: moving group rows
+            for (Index j = 0; j < ns; ++j) {
+                const auto X = sg[j].x.leftCols(n);
+                Eigen::MatrixXd xtx(n, n);
+                gemm(xtx, X, Op::T, X, Op::N);
+                const Eigen::LLT<Eigen::MatrixXd> llt(xtx);
+                if (llt.info() != Eigen::Success)
+                    throw numerical_error(detail::concat("setup ", j, ": the reference rows of Gamma do not have full "
+                                                         "column rank at order ", n));
+                Wj[j] = llt.solve(Eigen::MatrixXd::Identity(n, n));
+                Xp[j] = llt.solve(X.transpose());  // X^+ = W X^T, n x p r
+                T[j] = j == 0 ? Eigen::MatrixXd::Identity(n, n) : Eigen::MatrixXd(Xp[j] * B);
+                E[j] = B - X * T[j];
+                G[j] = sg[j].m.leftCols(n) * T[j];
+            }
+            // (A, C) from Gamma_g: the least squares of the shifts is row-order free, so the
+            // groups are stacked (references, then each setup's moving rows).
+            const Index rows_up = (p - 1) * l_g;
+            Eigen::MatrixXd up(rows_up, n), dw(rows_up, n);
+            {
+                Index at = 0;
+                const auto put = [&](const Eigen::MatrixXd& g, Index w) {
+                    if (w == 0) return;
+                    up.middleRows(at, (p - 1) * w) = g.topRows((p - 1) * w);
+                    dw.middleRows(at, (p - 1) * w) = g.bottomRows((p - 1) * w);
+                    at += (p - 1) * w;
+                };
+                put(B, r);
+                for (Index j = 0; j < ns; ++j) put(G[j], sg[j].w);
+            }
+            Eigen::HouseholderQR<Eigen::MatrixXd> qr(up);
+            const Eigen::MatrixXd R = qr.matrixQR().topRows(n).triangularView<Eigen::Upper>();
+            const Eigen::MatrixXd qtdw = (qr.householderQ().transpose() * dw).topRows(n);
+            StateSpace ss;
+            ss.A = R.triangularView<Eigen::Upper>().solve(qtdw);
+            ss.C.resize(l_g, n);
+            ss.C.topRows(r) = B.topRows(r);
+            for (Index j = 0; j < ns; ++j) ss.C.middleRows(c0[j], sg[j].w) = G[j].topRows(sg[j].w);
+            Eigenstructure eig;
+            modes = modes_from_system(ss, options.fs, unc ? &eig : nullptr);
+            if (unc) {
+                // Setup 0's blocks reach every group j >= 1 through P_j dX_0, P_j = M_j X_j^+:
+                // the n x p r sums K_XY = sum_j G_j,X^T P_j,Y are formed once per order (§13.3).
+                const Index pr = p * r;
+                Eigen::MatrixXd k1 = Eigen::MatrixXd::Zero(n, pr), k2 = k1, k3 = k1;
+                std::vector<Eigen::MatrixXd> P(ns);
+                for (Index j = 1; j < ns; ++j) {
+                    const Index w = sg[j].w;
+                    if (w == 0) continue;
+                    P[j] = sg[j].m.leftCols(n) * Xp[j];
+                    const Index rw = (p - 1) * w;
+                    gemm(k1, G[j].topRows(rw), Op::T, P[j].topRows(rw), Op::N, 1.0, 1.0);
+                    gemm(k2, G[j].bottomRows(rw), Op::T, P[j].topRows(rw), Op::N, 1.0, 1.0);
+                    gemm(k3, G[j].topRows(rw), Op::T, P[j].bottomRows(rw), Op::N, 1.0, 1.0);
+                }
+                detail::BlockQ bq(nb_total, n, l_g);
+                for (Index j = 0; j < ns; ++j) {
+                    const detail::SetupGamma& g = sg[j];
+                    detail::parallel_for(g.nb, options.threads, [&](Index k) {
+                        const auto dX = g.dx.middleCols(k * g.n_max, n);
+                        const auto dM = g.dm.middleCols(k * g.n_max, n);
+                        Eigen::MatrixXd q1 = Eigen::MatrixXd::Zero(n, n), q2 = q1, q3 = q1;
+                        Eigen::MatrixXd q4 = Eigen::MatrixXd::Zero(l_g, n);
+                        if (j == 0) {  // (12.6)
+                            detail::add_group_q(B, dX, r, q1, q2, q3);
+                            detail::add_group_q(G[0], dM, g.w, q1, q2, q3);
+                            // (P_j dX)_up = P_j,up dX: the row selection falls on P_j
+                            q1.noalias() += k1 * dX;
+                            q2.noalias() += k2 * dX;
+                            q3.noalias() += k3 * dX;
+                            q4.topRows(r) = dX.topRows(r);
+                            q4.middleRows(c0[0], g.w) = dM.topRows(g.w);
+                            for (Index i = 1; i < ns; ++i)
+                                if (sg[i].w > 0) q4.middleRows(c0[i], sg[i].w).noalias() = P[i].topRows(sg[i].w) * dX;
+                        } else {  // (12.5): dT = -X^+ dX T + W dX^T E; dG = dM T + M dT
+                            Eigen::MatrixXd dT = -(Xp[j] * dX) * T[j];
+                            dT.noalias() += Wj[j] * (dX.transpose() * E[j]);
+                            Eigen::MatrixXd dG = dM * T[j];
+                            dG.noalias() += sg[j].m.leftCols(n) * dT;
+                            detail::add_group_q(G[j], dG, g.w, q1, q2, q3);
+                            q4.middleRows(c0[j], g.w) = dG.topRows(g.w);
+                        }
+                        bq.set(col0[j] + k, q3 + q2.transpose(), q1 + q1.transpose(), q4);
+                    });
+                }
+                // Stages 4-5 (§9) unchanged on Gamma_g, all blocks of all setups at once.
+                const detail::OrderContext ctx(eig, ss, R);
+                Eigen::MatrixXcd dlam;
+                std::vector<Eigen::MatrixXcd> dshape;
+                detail::eigen_perturbation_blocks(ctx, bq, dlam, dshape);
+                const Index nm = modes.n_modes(), np = 2 + 2 * l_g;
+                modes.frequency_std.resize(nm);
+                modes.damping_std.resize(nm);
+                modes.mode_shape_std_real.resize(l_g, nm);
+                modes.mode_shape_std_imag.resize(l_g, nm);
+                modes.covariance.resize(np * np, nm);
+                modes.block_too_short.resize(nm);
+                modes.frequency_damping_correlation.resize(nm);
+                modes.noise_coupling = Eigen::VectorXd::Ones(nm);
+                modes.noise_coupled = Eigen::Array<bool, Eigen::Dynamic, 1>::Constant(nm, false);
+                for (Index i = 0; i < nm; ++i) {
+                    const Eigen::MatrixXd ut = detail::modal_perturbation(
+                        ctx.lambda(i), options.fs, ss.C.cast<cd>() * ctx.phi.col(i), modes.reference_component(i),
+                        dlam.row(i), dshape[i]);
+                    const Eigen::MatrixXd cv = ut * ut.transpose();
+                    modes.covariance.col(i) = Eigen::Map<const Eigen::VectorXd>(cv.data(), np * np);
+                    const Eigen::VectorXd sd = cv.diagonal().cwiseMax(0.0).cwiseSqrt();
+                    modes.frequency_std(i) = sd(0);
+                    modes.damping_std(i) = sd(1);
+                    modes.frequency_damping_correlation(i) =
+                        cv(0, 0) > 0.0 && cv(1, 1) > 0.0 ? cv(1, 0) / std::sqrt(cv(0, 0) * cv(1, 1))
+                                                         : std::numeric_limits<double>::quiet_NaN();
+                    modes.mode_shape_std_real.col(i) = sd.segment(2, l_g);
+                    modes.mode_shape_std_imag.col(i) = sd.segment(2 + l_g, l_g);
+                    const double decay_s = 1.0 / (2.0 * detail::pi * modes.frequency_hz(i) * modes.damping_ratio(i));
+                    modes.block_too_short(i) = modes.damping_ratio(i) > 0.0 && block_seconds < 0.5 * decay_s;
+                }
+            }
+        } catch (const numerical_error& e) {
+            modes = detail::degenerate_modes(n, l_g, unc);
+            modes.note = e.what();
+        }
+        out.modes[oi] = std::move(modes);
+    }
+
+    std::vector<Index> degenerate;
+    for (const Modes& m : out.modes)
+        if (m.degenerate) degenerate.push_back(m.order);
+    if (!degenerate.empty()) {
+        std::ostringstream list;
+        for (size_t i = 0; i < degenerate.size(); ++i) list << (i ? ", " : "") << degenerate[i];
+        out.warn(IdentificationWarning::degenerate_orders, detail::concat(
+            "no modes at order(s) ", list.str(), ": above the numerical rank of a setup's H (", n_real,
+            ") or no usable merge or eigen-decomposition there"));
+    }
+    SlowDecay& slow = out.slow_decay;
+    slow.block_seconds = block_seconds;
+    Index shortest = std::numeric_limits<Index>::max();
+    for (const SetupData& s : setups) shortest = std::min(shortest, s.covariances.n_columns);
+    slow.record_seconds = static_cast<double>(shortest) / options.fs;
+    for (const Modes& m : out.modes)
+        for (Index i = 0; i < m.block_too_short.size(); ++i)
+            if (m.block_too_short(i)) {
+                ++slow.n_poles;
+                slow.longest_decay_s = std::max(slow.longest_decay_s,
+                                                1.0 / (2.0 * detail::pi * m.frequency_hz(i) * m.damping_ratio(i)));
+            }
+    if (slow.n_poles > 0) {
+        slow.fitting_n_blocks = static_cast<Index>(slow.record_seconds / (0.5 * slow.longest_decay_s));
+        out.warn(IdentificationWarning::slow_decay, detail::concat(
+            slow.n_poles, " pole(s) decay more slowly than the shortest setup's blocks are long (", block_seconds,
+            " s, less than half of the decay time, up to ", slow.longest_decay_s,
+            " s); their standard deviations are less reliable"));
+    }
+    return out;
+}
+
+}  // namespace modaluq
