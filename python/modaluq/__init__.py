@@ -23,6 +23,7 @@ The wing's names here (``monitor``, ``Monitoring``, ``load_tracks``, ``simulate_
 
 from ._core import NumericalError
 from .analysis import Analysis
+from .buildinfo import show_config
 from .horizons import HorizonCheck, check_horizons
 from .identification import identify
 from .results import ModalUQWarning, Modes, Result
@@ -56,6 +57,7 @@ __all__ = [
     "modal_assurance_criterion",
     "monitor",
     "select_modes",
+    "show_config",
     "simulate",
     "simulate_monitoring",
     "stabilization_diagram",
