@@ -496,17 +496,21 @@ def versions():
 
 
 def modaluq_build():
-    """Where the measured modaluq comes from: install time of its extension, checkout commit."""
+    """Where the measured modaluq comes from: its CPU path (the workers inherit MODALUQ_CPU, so they
+    run the same one), install time of its extension, checkout commit."""
     parts = []
     try:
-        import importlib.util
-
-        spec = importlib.util.find_spec("modaluq._core")
-        if spec and spec.origin:
-            stamp = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime(os.path.getmtime(spec.origin)))
-            parts.append(f"extension built {stamp}")
         from modaluq import _core
 
+        try:
+            from modaluq.buildinfo import core_summary
+
+            flags = getattr(_core, "builds", {}).get(_core.cpu_path, "")
+            parts.append(f"core {core_summary()}" + (f" [{flags}]" if flags else ""))
+        except ImportError:  # a modaluq from before the CPU paths (issue 25): one build
+            parts.append("core: one build")
+        stamp = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime(os.path.getmtime(_core.__file__)))
+        parts.append(f"extension built {stamp}")
         parts.append("large products through " + ("OpenBLAS" if getattr(_core, "uses_blas", False) else "Eigen"))
     except Exception:
         pass
@@ -683,7 +687,8 @@ def main(argv=None):
     print(f"python  : {platform.python_version()}, numpy {vers['numpy']}, scipy {vers['scipy']}; "
           f"1 BLAS/OpenMP thread ({', '.join(v + '=1' for v in _THREAD_VARS[:3])})")
     print("versions: " + ", ".join(f"{t} {vers[t] or '(not installed)'}" for t in TOOLS))
-    print(f"modaluq : {modaluq_build()}")
+    build = modaluq_build()
+    print(f"modaluq : {build}")
     print(f"command : python bench/run.py {' '.join(argv if argv is not None else sys.argv[1:])}".rstrip())
     print(f"runs    : modaluq median of {rep_mq}, peers median of {rep_peer} "
           f"(once when a run takes > 60 s); timeout {args.timeout:.0f} s wall\n")
@@ -705,7 +710,8 @@ def main(argv=None):
         return 1
 
     data_root = tempfile.mkdtemp(prefix="modaluq-bench-")
-    results = {"machine": info, "versions": vers, "configs": {}, "floor": None, "sweeps": None}
+    results = {"machine": info, "versions": vers, "modaluq_build": build, "configs": {}, "floor": None,
+               "sweeps": None}
     try:
         paths = {}
         for name in names:

@@ -8,7 +8,9 @@
 #
 # Environment: MODALUQ_VENV (default .venv), PYTHON (default python3),
 # MODALUQ_NATIVE=ON to compile for this machine's CPU only (-march=native; the default build
-# runs on any x86-64/arm64 CPU, so a wheel copied to another machine does not die of SIGILL).
+# runs on any x86-64/arm64 CPU, so a wheel copied to another machine does not die of SIGILL: on
+# x86-64 it compiles the core for the baseline and for x86-64-v3 (AVX2/FMA) and `import modaluq`
+# runs the one the CPU supports; MODALUQ_CPU=baseline forces the baseline).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 extras="plot,io,export,monitor,report"
@@ -44,6 +46,7 @@ fi
 # heartbeat instead of minutes of silence, and keep the whole log for when it fails.
 log="$venv/modaluq-build.log"
 echo "== building and installing modaluq[$extras] (the C++ extension takes several minutes; log: $log)"
+# on x86-64 the core is compiled twice, _core_baseline and _core_x86_64_v3 (bindings/CMakeLists.txt)
 native=()
 if [[ "${MODALUQ_NATIVE:-OFF}" == "ON" ]]; then native=(-Ccmake.define.MODALUQ_NATIVE=ON); fi
 # The build tools live in the venv and the build reuses build/ (pyproject.toml's build-dir), so
@@ -77,4 +80,4 @@ if ((status)); then
   exit 1
 fi
 trap - EXIT
-echo "== installed: $("$venv/bin/python" -c 'import modaluq; print("modaluq", modaluq.__version__)') in $venv"
+echo "== installed: $("$venv/bin/python" -c 'import modaluq, modaluq.buildinfo as b; print("modaluq", modaluq.__version__, "(C++ core:", b.core_summary() + ")")') in $venv"

@@ -23,6 +23,7 @@ The wing's names here (``monitor``, ``Monitoring``, ``load_tracks``, ``simulate_
 
 from ._core import NumericalError
 from .analysis import Analysis
+from .buildinfo import show_config
 from .geometry import Geometry
 from .horizons import HorizonCheck, check_horizons
 from .identification import identify, identify_setups
@@ -59,6 +60,7 @@ __all__ = [
     "modal_assurance_criterion",
     "monitor",
     "select_modes",
+    "show_config",
     "simulate",
     "simulate_monitoring",
     "stabilization_diagram",

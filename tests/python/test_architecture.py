@@ -18,8 +18,8 @@ PACKAGE = pathlib.Path(__file__).resolve().parents[2] / "python" / "modaluq"
 #: Layer of every module, lowest first (docs/architecture.md). A name ending in ``.*`` covers a
 #: subpackage. A module may import modules of its own layer or below; never above.
 LAYERS = {
-    "modaluq._core": 0, "modaluq._blas": 0, "modaluq.version": 0,
-    "modaluq.checks": 1, "modaluq.jsonvalues": 1, "modaluq.atomic": 1,
+    "modaluq._core": 0, "modaluq._dispatch": 0, "modaluq._blas": 0, "modaluq.version": 0,
+    "modaluq.checks": 1, "modaluq.buildinfo": 1, "modaluq.jsonvalues": 1, "modaluq.atomic": 1,
     # settings and the signal helpers they are applied with; the side leaves (files, simulator)
     "modaluq.settings": 2, "modaluq.preprocess": 2, "modaluq.auto_settings": 2, "modaluq.spectrum": 2,
     "modaluq.indicators": 2,

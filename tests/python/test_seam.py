@@ -9,6 +9,7 @@ the one imported).
 
 import json
 import os
+import subprocess
 import sys
 import warnings
 
@@ -98,9 +99,31 @@ CASES = ["chain_slow_mode", "chain_no_slow_mode", "chain_high_orders", "chain_no
          "chain_per_cluster_size", "chain_io", "turbine"]
 
 
+def _printed_on_the_baseline(name):
+    """``_printed`` of a case on the baseline core, on which the expected output was written: on
+    another CPU path (docs/architecture.md) rounding differs, and in the wind-turbine record a pole
+    on the edge of a cluster changes sides (test_dispatch.py compares the paths' numbers)."""
+    from modaluq import _core, _dispatch
+
+    if _core.cpu_path == "baseline":
+        return _printed(_run(name))
+    if "baseline" not in _dispatch.available_paths():
+        pytest.skip(f"the expected output was written on the baseline core; this install has {_core.cpu_path} only")
+    if name == "turbine" and _tdms_path() is None:
+        pytest.skip("the wind-turbine record (shared/data) is not here")
+    code = (f"import json, sys; sys.path.insert(0, {os.path.dirname(__file__)!r}); import test_seam as t; "
+            f"print(json.dumps(t._printed(t._cases()[{name!r}]())))")
+    package = os.path.dirname(os.path.dirname(os.path.abspath(_core.__file__)))
+    env = {**os.environ, "MODALUQ_CPU": "baseline",
+           "PYTHONPATH": package + (os.pathsep + os.environ["PYTHONPATH"] if os.environ.get("PYTHONPATH") else "")}
+    run = subprocess.run([sys.executable, "-W", "ignore", "-c", code], capture_output=True, text=True, env=env)
+    assert run.returncode == 0, run.stderr
+    return json.loads(run.stdout.splitlines()[-1])
+
+
 @pytest.mark.parametrize("name", CASES)
 def test_the_printed_output_is_what_it_was_when_python_showed_the_cores_words(name, expected):
-    assert _printed(_run(name)) == expected[name]
+    assert _printed_on_the_baseline(name) == expected[name]
 
 
 @pytest.mark.parametrize("name", CASES)

@@ -184,8 +184,10 @@ PATCHED_CORE = textwrap.dedent("""
     import importlib.machinery, importlib.util, json, pathlib, sys
 
     package = pathlib.Path(importlib.util.find_spec("modaluq").submodule_search_locations[0])
-    path = next(p for s in importlib.machinery.EXTENSION_SUFFIXES if (p := package / f"_core{s}").exists())
-    spec = importlib.util.spec_from_file_location("modaluq._core", path)
+    # the baseline core, which every CPU runs (or the native one of a MODALUQ_NATIVE=ON build)
+    path = next(p for name in ("_core_baseline", "_core_native") for s in importlib.machinery.EXTENSION_SUFFIXES
+                if (p := package / f"{name}{s}").exists())
+    spec = importlib.util.spec_from_file_location(f"modaluq.{path.name.split('.')[0]}", path)
     core = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(core)
     sys.modules["modaluq._core"] = core

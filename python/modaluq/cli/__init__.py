@@ -9,11 +9,25 @@ import argparse
 import os
 import sys
 
+from ..buildinfo import core_summary
 from ..version import __version__
 from . import demo, identify, info, monitor, validate
 from .common import Parser
 
 __all__ = ["build_parser", "main"]
+
+
+class _Version(argparse.Action):
+    """``--version``: the version and which build of the C++ core runs (argparse's own action would
+    rewrap the lines)."""
+
+    def __init__(self, option_strings, dest=argparse.SUPPRESS, default=argparse.SUPPRESS, help=None):
+        super().__init__(option_strings, dest=dest, default=default, nargs=0, help=help)
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        print(f"modaluq {__version__}\nC++ core: {core_summary()}\n"
+              "(more: python -c 'import modaluq; modaluq.show_config()')")
+        parser.exit()
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -22,7 +36,7 @@ def build_parser() -> argparse.ArgumentParser:
         prog="modaluq",
         description="Modal parameters with their uncertainty from vibration data (covariance-driven SSI).",
     )
-    p.add_argument("--version", action="version", version=f"modaluq {__version__}")
+    p.add_argument("--version", action=_Version, help="show the version and the C++ core's CPU path, and exit")
     sub = p.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
     for command in (demo, identify, info, monitor, validate):
