@@ -95,8 +95,10 @@ def _text(c: dict) -> str:
         lacks = [f for f, ok in core["features"].items() if not ok]
         lines.append(f"  CPU:     {', '.join(have) or '-'}" + (f"; lacks {', '.join(lacks)}" if lacks else "")
                      + f" ({core['detected_by']})")
-    lines.append(f"  {_dispatch.ENV}: " + (core["MODALUQ_CPU"] if core["MODALUQ_CPU"] is not None else
-                                          "unset (MODALUQ_CPU=baseline forces the baseline core)"))
+    if core["MODALUQ_CPU"] is not None:
+        lines.append(f"  {_dispatch.ENV}: {core['MODALUQ_CPU']}")
+    elif "baseline" in core["available"] and core["path"] != "baseline":
+        lines.append(f"  {_dispatch.ENV}: unset ({_dispatch.ENV}=baseline forces the baseline core)")
     lines.append("builds:")
     width = max((len(p) for p in c["builds"]), default=0)
     for path, flags in c["builds"].items():
