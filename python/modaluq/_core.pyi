@@ -8,7 +8,7 @@ import collections.abc
 import numpy
 import numpy.typing
 import typing
-__all__: list[str] = ['ClusteringOptions', 'CovarianceAccumulator', 'CovarianceAccumulatorState', 'Covariances', 'Diagram', 'DropReason', 'HankelLayout', 'Identification', 'IdentificationWarning', 'IdentifyOptions', 'IndicatorStatistics', 'Linkage', 'Modes', 'NumericalError', 'PoleStatus', 'Poles', 'SelectedModes', 'SetupData', 'SetupsIdentification', 'SlowDecay', 'StabilityCriteria', 'cluster_labels', 'compute_covariances', 'identify', 'identify_covariances', 'identify_setups', 'mean_phase_deviation', 'modal_assurance', 'modal_assurance_criterion', 'modal_assurance_statistics', 'modal_phase_collinearity', 'modal_phase_collinearity_statistics', 'poles_of', 'select_modes', 'stabilization_diagram', 'uses_blas']
+__all__: list[str] = ['ClusteringOptions', 'CovarianceAccumulator', 'CovarianceAccumulatorState', 'Covariances', 'Diagram', 'DropReason', 'HankelLayout', 'Identification', 'IdentificationWarning', 'IdentifyOptions', 'IndicatorStatistics', 'Linkage', 'Modes', 'NumericalError', 'PoleStatus', 'Poles', 'SelectedModes', 'SetupData', 'SetupsIdentification', 'SlowDecay', 'StabilityCriteria', 'blas_library', 'builds', 'cluster_labels', 'compute_covariances', 'cpu_path', 'eigen_simd', 'eigen_version', 'identify', 'identify_covariances', 'identify_setups', 'mean_phase_deviation', 'modal_assurance', 'modal_assurance_criterion', 'modal_assurance_statistics', 'modal_phase_collinearity', 'modal_phase_collinearity_statistics', 'poles_of', 'select_modes', 'stabilization_diagram', 'uses_blas']
 class NumericalError(ArithmeticError):
     pass
 class HankelLayout:
@@ -1084,4 +1084,9 @@ def select_modes(diagram: Diagram, options: ClusteringOptions) -> SelectedModes:
 def stabilization_diagram(poles: Poles, criteria: StabilityCriteria) -> Diagram:
     ...
 __version__: str = '0.1.0'
-uses_blas: bool = True
+blas_library: str
+builds: dict[str, str]
+cpu_path: str
+eigen_simd: str
+eigen_version: str
+uses_blas: bool
