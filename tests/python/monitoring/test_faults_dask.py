@@ -112,7 +112,9 @@ def test_while_modaluq_monitor_workers_2_runs_only_its_tls_comm_ports_listen(tmp
     """What `ss -ltnp` shows during `modaluq monitor --workers 2`: the listeners of the driver (scheduler,
     nannies) and of its worker processes are 5 TLS ports on 127.0.0.1, none answering HTTP."""
     folder = tmp_path / "site"
-    simulate_monitoring(20, n_samples=20000, seed=2).write(folder, format="npz")
+    # enough records that the run outlasts the probes (it is killed after them): with 20, a fast
+    # run once ended between the listing and the probe of its last port (connection refused)
+    simulate_monitoring(120, n_samples=20000, seed=2).write(folder, format="npz")
     cmd = [sys.executable, "-m", "modaluq.cli", "monitor", str(folder), "--out", str(tmp_path / "tracks.nc"),
            "--orders", "2:40:2", "--workers", "2", "--no-progress"]
     proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
