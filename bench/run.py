@@ -149,13 +149,25 @@ def adapter_modaluq(y, u, fs, cfg, threads=1):
     return run, extract, settings
 
 
-def adapter_pyoma2(y, u, fs, cfg, step=2):
+def pyoma2_runner(y, fs, kw):
+    """A call running pyOMA2's SSI (keywords ``kw``, with its ``name``) on y; returns its result."""
     import logging
 
     logging.getLogger("pyoma2").setLevel(logging.WARNING)
     from pyoma2.algorithms import SSI
     from pyoma2.setup import SingleSetup
 
+    def run():
+        setup = SingleSetup(y, fs=fs)
+        alg = SSI(**kw)
+        setup.add_algorithms(alg)
+        setup.run_by_name(kw["name"])
+        return alg.result
+
+    return run
+
+
+def adapter_pyoma2(y, u, fs, cfg, step=2):
     method = "IOcov" if cfg["io"] else "cov"
     # Hard criteria off except the damping bound (cheap post-filters; the MPC / MPD / CoV
     # limits drop true modes of the 30-DOF chain whose poles pyOMA2 did compute, equal to
@@ -165,13 +177,7 @@ def adapter_pyoma2(y, u, fs, cfg, step=2):
               hc={"xi_max": 0.2, "mpc_lim": None, "mpd_lim": None, "CoV_max": None})
     if cfg["io"]:
         kw["U"] = u
-
-    def run():
-        setup = SingleSetup(y, fs=fs)
-        alg = SSI(**kw)
-        setup.add_algorithms(alg)
-        setup.run_by_name("ssi")
-        return alg.result
+    run = pyoma2_runner(y, fs, kw)
 
     def extract(res, n):
         col = n // step

@@ -110,23 +110,11 @@ def worker(spec):
             return modaluq.identify(y, fs=FS, block_rows=cfg["p"], orders=orders, n_blocks=cfg["n_blocks"],
                                     references=cfg["references"], uncertainty=True, threads=1)
     else:
-        import logging
-
-        logging.getLogger("pyoma2").setLevel(logging.WARNING)
-        from pyoma2.algorithms import SSI
-        from pyoma2.setup import SingleSetup
-
         # pyOMA2's reference-based SSI: ref_ind; step 2 as in bench/run.py
-        kw = dict(name="ssi", method="cov", br=cfg["p"], ordmin=0, ordmax=cfg["n_max"], step=2,
-                  calc_unc=True, nb=cfg["n_blocks"], ref_ind=cfg["references"],
-                  hc={"xi_max": 0.2, "mpc_lim": None, "mpd_lim": None, "CoV_max": None})
-
-        def run():
-            setup = SingleSetup(y, fs=FS)
-            alg = SSI(**kw)
-            setup.add_algorithms(alg)
-            setup.run_by_name("ssi")
-            return alg.result
+        run = bench_run.pyoma2_runner(y, FS, dict(
+            name="ssi", method="cov", br=cfg["p"], ordmin=0, ordmax=cfg["n_max"], step=2, calc_unc=True,
+            nb=cfg["n_blocks"], ref_ind=cfg["references"],
+            hc={"xi_max": 0.2, "mpc_lim": None, "mpd_lim": None, "CoV_max": None}))
     import gc
 
     gc.collect()

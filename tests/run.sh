@@ -13,10 +13,13 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 JOBS=${JOBS:-2}
+start=$SECONDS
+stage() { echo "== $1   [$((SECONDS - start)) s since the start]"; }  # where CI's time goes
+stage "setup: system packages, .venv, the package"
 bash scripts/setup.sh --test
 PY="${MODALUQ_VENV:-.venv}/bin/python"
 
-echo "== C++ core: build (assertions, ASan, UBSan) and ctest"
+stage "C++ core: build (assertions, ASan, UBSan) and ctest"
 san="-fsanitize=address,undefined -fno-sanitize-recover=all -fno-omit-frame-pointer"
 cmake -S . -B build/cpp-sanitize -DCMAKE_BUILD_TYPE=Debug -DCMAKE_CXX_FLAGS="$san" \
       -DCMAKE_EXE_LINKER_FLAGS="$san" >/dev/null
@@ -24,18 +27,19 @@ cmake --build build/cpp-sanitize -j"$JOBS"
 ASAN_OPTIONS=detect_leaks=1:abort_on_error=0 UBSAN_OPTIONS=print_stacktrace=1 \
   ctest --test-dir build/cpp-sanitize --output-on-failure -j"$JOBS"
 
-echo "== CMake: modaluq as a subproject leaves the parent's build type, BLAS and tests alone"
+stage "CMake: modaluq as a subproject leaves the parent's build type, BLAS and tests alone"
 cmake -S tests/cmake_subproject -B build/cmake-subproject >/dev/null
 
-echo "== C++ consumer project against the installed package"
+stage "C++ consumer project against the installed package"
 cmake --install build/cpp-sanitize --prefix build/prefix >/dev/null
 cmake -S cpp/examples -B build/example -DCMAKE_PREFIX_PATH="$PWD/build/prefix" >/dev/null
 cmake --build build/example -j"$JOBS"
 build/example/identify_stream
 
-echo "== Python: ruff (lint) and pytest (tests and the package's docstring examples, warnings as errors)"
+stage "Python: ruff (lint) and pytest (tests and the package's docstring examples, warnings as errors)"
 "$PY" -m ruff check python tests bench studies
-"$PY" -m pytest -q --doctest-modules --pyargs modaluq tests/python
+"$PY" -m pytest -q --durations=15 --doctest-modules --pyargs modaluq tests/python
 
-echo "== loaders: short fuzz run (the long run: docs/reliability.md)"
+stage "loaders: short fuzz run (the long run: docs/reliability.md)"
 "$PY" tests/fuzz/fuzz_loaders.py --seconds "${FUZZ_SECONDS:-10}" --seed "${FUZZ_SEED:-0}" --save-dir build/fuzz-failures
+stage "done"

@@ -147,6 +147,36 @@ inline constexpr double kMinSignalToNoise = 3.0;
 /// An order without modes: every array empty but with the shapes of zero modes (l rows for the
 /// shapes), the uncertainty arrays present when the run has uncertainty, so that code reading
 /// all orders alike needs no special case.
+/// The orders whose modes are degenerate, as "4, 6, 8" (empty when there is none).
+inline std::string degenerate_order_list(const std::vector<Modes>& modes) {
+    std::ostringstream list;
+    const char* sep = "";
+    for (const Modes& m : modes)
+        if (m.degenerate) {
+            list << sep << m.order;
+            sep = ", ";
+        }
+    return list.str();
+}
+
+/// SlowDecay of an identification: the poles flagged block_too_short at every order, their
+/// longest decay time and the most blocks that would each last half of it.
+inline SlowDecay count_slow_decay(const std::vector<Modes>& modes, double block_seconds, double record_seconds) {
+    SlowDecay slow;
+    slow.block_seconds = block_seconds;
+    slow.record_seconds = record_seconds;
+    for (const Modes& m : modes)
+        for (Index i = 0; i < m.block_too_short.size(); ++i)
+            if (m.block_too_short(i)) {
+                ++slow.n_poles;
+                slow.longest_decay_s = std::max(slow.longest_decay_s,
+                                                1.0 / (2.0 * pi * m.frequency_hz(i) * m.damping_ratio(i)));
+            }
+    if (slow.n_poles > 0)
+        slow.fitting_n_blocks = static_cast<Index>(slow.record_seconds / (0.5 * slow.longest_decay_s));
+    return slow;
+}
+
 inline Modes degenerate_modes(Index order, Index n_outputs, bool with_uncertainty) {
     Modes m;
     m.order = order;
@@ -265,28 +295,14 @@ inline Identification identify_with_factor(const Covariances& cov, Eigen::Matrix
         }
         out.modes[k] = std::move(m);
     });
-    std::vector<Index> degenerate;
-    for (const Modes& m : out.modes)
-        if (m.degenerate) degenerate.push_back(m.order);
-    if (!degenerate.empty()) {
-        std::ostringstream list;
-        for (size_t i = 0; i < degenerate.size(); ++i) list << (i ? ", " : "") << degenerate[i];
+    const std::string degenerate = degenerate_order_list(out.modes);
+    if (!degenerate.empty())
         out.warn(IdentificationWarning::degenerate_orders, detail::concat(
-            "no modes at order(s) ", list.str(), ": above the numerical rank of H (", re.numerical_rank(),
+            "no modes at order(s) ", degenerate, ": above the numerical rank of H (", re.numerical_rank(),
             ") or no usable eigen-decomposition of A there; use orders <= ", re.max_order()));
-    }
-    SlowDecay& slow = out.slow_decay;
-    slow.block_seconds = block_seconds;
-    slow.record_seconds = static_cast<double>(cov.n_columns) / options.fs;
-    for (const Modes& m : out.modes)
-        for (Index i = 0; i < m.block_too_short.size(); ++i)
-            if (m.block_too_short(i)) {
-                ++slow.n_poles;
-                slow.longest_decay_s = std::max(slow.longest_decay_s,
-                                                1.0 / (2.0 * detail::pi * m.frequency_hz(i) * m.damping_ratio(i)));
-            }
+    out.slow_decay = count_slow_decay(out.modes, block_seconds, static_cast<double>(cov.n_columns) / options.fs);
+    const SlowDecay& slow = out.slow_decay;
     if (slow.n_poles > 0) {
-        slow.fitting_n_blocks = static_cast<Index>(slow.record_seconds / (0.5 * slow.longest_decay_s));
         out.warn(IdentificationWarning::slow_decay, detail::concat(
             slow.n_poles, " pole(s) decay more slowly than the blocks are long (blocks of ", block_seconds,
             " s, less than half of the decay time 1/(2 pi f xi), up to ", slow.longest_decay_s,

@@ -28,7 +28,6 @@
 #include <cmath>
 #include <complex>
 #include <limits>
-#include <sstream>
 #include <string>
 #include <utility>
 #include <vector>
@@ -429,30 +428,16 @@ inline SetupsIdentification identify_setups(const std::vector<SetupData>& setups
         out.modes[oi] = std::move(modes);
     }
 
-    std::vector<Index> degenerate;
-    for (const Modes& m : out.modes)
-        if (m.degenerate) degenerate.push_back(m.order);
-    if (!degenerate.empty()) {
-        std::ostringstream list;
-        for (size_t i = 0; i < degenerate.size(); ++i) list << (i ? ", " : "") << degenerate[i];
+    const std::string degenerate = detail::degenerate_order_list(out.modes);
+    if (!degenerate.empty())
         out.warn(IdentificationWarning::degenerate_orders, detail::concat(
-            "no modes at order(s) ", list.str(), ": above the numerical rank of a setup's H (", n_real,
+            "no modes at order(s) ", degenerate, ": above the numerical rank of a setup's H (", n_real,
             ") or no usable merge or eigen-decomposition there"));
-    }
-    SlowDecay& slow = out.slow_decay;
-    slow.block_seconds = block_seconds;
     Index shortest = std::numeric_limits<Index>::max();
     for (const SetupData& s : setups) shortest = std::min(shortest, s.covariances.n_columns);
-    slow.record_seconds = static_cast<double>(shortest) / options.fs;
-    for (const Modes& m : out.modes)
-        for (Index i = 0; i < m.block_too_short.size(); ++i)
-            if (m.block_too_short(i)) {
-                ++slow.n_poles;
-                slow.longest_decay_s = std::max(slow.longest_decay_s,
-                                                1.0 / (2.0 * detail::pi * m.frequency_hz(i) * m.damping_ratio(i)));
-            }
+    out.slow_decay = detail::count_slow_decay(out.modes, block_seconds, static_cast<double>(shortest) / options.fs);
+    const SlowDecay& slow = out.slow_decay;
     if (slow.n_poles > 0) {
-        slow.fitting_n_blocks = static_cast<Index>(slow.record_seconds / (0.5 * slow.longest_decay_s));
         out.warn(IdentificationWarning::slow_decay, detail::concat(
             slow.n_poles, " pole(s) decay more slowly than the shortest setup's blocks are long (", block_seconds,
             " s, less than half of the decay time, up to ", slow.longest_decay_s,

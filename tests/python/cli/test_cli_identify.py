@@ -178,13 +178,6 @@ def test_missing_file_is_one_line(capsys, tmp_path):
 # --------------------------------------------------------------------------- issue #13: outputs never destroy data
 
 
-def _one_line_error(capsys, status):
-    out, err = capsys.readouterr()
-    assert status == 2, err
-    lines = err.strip().splitlines()
-    assert len(lines) == 1 and "Traceback" not in err, err
-    return lines[0]
-
 
 def _sha256(path):
     return hashlib.sha256(path.read_bytes()).hexdigest()
@@ -203,55 +196,55 @@ FAST_ARGS = ["--inputs", "force", "--block-rows", "10", "--orders", "2:16:2", "-
     ("--plot-shapes", "rec.csv"), ("--out", "link.csv"),
 ])
 @pytest.mark.parametrize("overwrite", [[], ["--overwrite"]])
-def test_the_input_file_is_never_overwritten(small_csv, monkeypatch, capsys, option, spelling, overwrite):
+def test_the_input_file_is_never_overwritten(small_csv, monkeypatch, one_line_error, option, spelling, overwrite):
     monkeypatch.chdir(small_csv.parent)
     (small_csv.parent / "sub").mkdir()
     os.symlink(small_csv, small_csv.parent / "link.csv")
     before = _sha256(small_csv)
-    err = _one_line_error(capsys, main(["identify", "rec.csv", option, spelling, *FAST_ARGS, *overwrite]))
+    err = one_line_error(main(["identify", "rec.csv", option, spelling, *FAST_ARGS, *overwrite]))
     assert err == f"modaluq identify: error: {option} {spelling} is the input file rec.csv; refusing to overwrite it"
     assert _sha256(small_csv) == before
 
 
-def test_hard_linked_input_is_recognised(small_csv, capsys):
+def test_hard_linked_input_is_recognised(small_csv, one_line_error):
     link = small_csv.parent / "same.csv"
     os.link(small_csv, link)
-    err = _one_line_error(capsys, main(["identify", str(small_csv), "--out", str(link), "--overwrite", *FAST_ARGS]))
+    err = one_line_error(main(["identify", str(small_csv), "--out", str(link), "--overwrite", *FAST_ARGS]))
     assert "is the input file" in err
 
 
-def test_existing_output_needs_overwrite(small_csv, capsys):
+def test_existing_output_needs_overwrite(small_csv, one_line_error):
     out = small_csv.parent / "modes.json"
     out.write_text("an earlier report\n")
-    err = _one_line_error(capsys, main(["identify", str(small_csv), "--out", str(out), *FAST_ARGS]))
+    err = one_line_error(main(["identify", str(small_csv), "--out", str(out), *FAST_ARGS]))
     assert err == f"modaluq identify: error: --out {out} exists; pass --overwrite to replace it"
     assert out.read_text() == "an earlier report\n"
     assert main(["identify", str(small_csv), "--out", str(out), "--overwrite", *FAST_ARGS]) == 0
     assert json.loads(out.read_text())["modes"]
 
 
-def test_existing_plot_needs_overwrite(small_csv, capsys):
+def test_existing_plot_needs_overwrite(small_csv, one_line_error):
     pytest.importorskip("matplotlib")
     png = small_csv.parent / "d.png"
     png.write_bytes(b"old")
-    err = _one_line_error(capsys, main(["identify", str(small_csv), "--plot", str(png), *FAST_ARGS]))
+    err = one_line_error(main(["identify", str(small_csv), "--plot", str(png), *FAST_ARGS]))
     assert f"--plot {png} exists; pass --overwrite" in err
     assert png.read_bytes() == b"old"
 
 
-def test_one_file_for_two_outputs_is_refused(small_csv, capsys, monkeypatch):
+def test_one_file_for_two_outputs_is_refused(small_csv, one_line_error, monkeypatch):
     monkeypatch.chdir(small_csv.parent)
-    err = _one_line_error(capsys, main(["identify", "rec.csv", "--out", "m.json", "--out", "./m.json", *FAST_ARGS]))
+    err = one_line_error(main(["identify", "rec.csv", "--out", "m.json", "--out", "./m.json", *FAST_ARGS]))
     assert err.endswith("--out ./m.json is also the file of --out m.json")
     assert not (small_csv.parent / "m.json").exists()
 
 
-def test_validate_refuses_to_overwrite_an_earlier_run(tmp_path, capsys):
+def test_validate_refuses_to_overwrite_an_earlier_run(tmp_path, one_line_error):
     out = tmp_path / "mc"
     out.mkdir()
     (out / "report.md").write_text("earlier\n")
     argv = ["validate", "--records", "2", "--samples", "3000", "--processes", "1", "--no-progress", "--out", str(out)]
-    err = _one_line_error(capsys, main(argv))
+    err = one_line_error(main(argv))
     assert f"--out {out / 'report.md'} exists; pass --overwrite" in err
     assert (out / "report.md").read_text() == "earlier\n"
 
@@ -260,13 +253,13 @@ def test_validate_refuses_to_overwrite_an_earlier_run(tmp_path, capsys):
 
 
 @pytest.mark.parametrize("spec", ["1:1000000000000", "2:100000000:2", "99999999999999999999999", "2,4,1000000"])
-def test_orders_out_of_range_are_refused_at_once_with_the_largest_possible(small_csv, capsys, spec):
+def test_orders_out_of_range_are_refused_at_once_with_the_largest_possible(small_csv, one_line_error, spec):
     import time
 
     t0 = time.perf_counter()
     status = main(["identify", str(small_csv), "--inputs", "force", "--block-rows", "10", "--orders", spec,
                    "--no-progress"])
-    err = _one_line_error(capsys, status)
+    err = one_line_error(status)
     assert time.perf_counter() - t0 < 10
     # 3 outputs, p = q = 10: min((p-1) l, q r) = min(27, 30)
     assert f"--orders '{spec}': order " in err and "above the largest possible, 27 = min((p-1)·l, q·r)" in err
@@ -291,8 +284,8 @@ def test_parse_orders_refuses_before_expanding():
     (["--block-rows", "15000"], "--block-rows 15000 with --past-block-rows 15000: p + q = 30000 exceeds the 20000 "
                                 "samples of the record"),
 ])
-def test_integer_options_are_capped_naming_the_option(small_csv, capsys, argv, match):
-    err = _one_line_error(capsys, main(["identify", str(small_csv), "--inputs", "force", "--no-progress", *argv]))
+def test_integer_options_are_capped_naming_the_option(small_csv, one_line_error, argv, match):
+    err = one_line_error(main(["identify", str(small_csv), "--inputs", "force", "--no-progress", *argv]))
     assert err.startswith("modaluq identify: error: ") and match in err
 
 
@@ -302,22 +295,22 @@ def test_integer_options_are_capped_naming_the_option(small_csv, capsys, argv, m
     (["--tolerance", "1"], "argument --tolerance: must be in (0, 1); got 1"),
     (["--seed", "-1"], "argument --seed: must be in [0, "),
 ])
-def test_validate_options_are_capped_naming_the_option(capsys, argv, match):
-    err = _one_line_error(capsys, main(["validate", "--no-progress", *argv]))
+def test_validate_options_are_capped_naming_the_option(one_line_error, argv, match):
+    err = one_line_error(main(["validate", "--no-progress", *argv]))
     assert err.startswith("modaluq validate: error: ") and match in err
 
 
-def test_missing_command_and_bad_demo_option_are_one_line(capsys):
-    assert _one_line_error(capsys, main([])) == "modaluq: error: the following arguments are required: COMMAND"
-    assert "argument --samples: must be in [1, " in _one_line_error(capsys, main(["demo", "--samples", "0"]))
-    assert _one_line_error(capsys, main(["identify", "x.csv", "--bogus"])) == \
+def test_missing_command_and_bad_demo_option_are_one_line(one_line_error):
+    assert one_line_error(main([])) == "modaluq: error: the following arguments are required: COMMAND"
+    assert "argument --samples: must be in [1, " in one_line_error(main(["demo", "--samples", "0"]))
+    assert one_line_error(main(["identify", "x.csv", "--bogus"])) == \
         "modaluq: error: unrecognized arguments: --bogus"
 
 
-def test_netcdf_output_without_xarray_is_refused_before_the_work(small_csv, capsys, monkeypatch):
+def test_netcdf_output_without_xarray_is_refused_before_the_work(small_csv, one_line_error, monkeypatch):
     monkeypatch.setitem(sys.modules, "xarray", None)
     nc = small_csv.parent / "d.nc"
-    err = _one_line_error(capsys, main(["identify", str(small_csv), "--out", str(nc), *FAST_ARGS]))
+    err = one_line_error(main(["identify", str(small_csv), "--out", str(nc), *FAST_ARGS]))
     assert f"--out {nc} needs xarray, which is not installed" in err and 'pip install ".[export]"' in err
     assert not nc.exists()
 

@@ -61,25 +61,18 @@ def test_identify_with_geometry_report_and_uff(record, tmp_path, capsys):
                                rtol=1e-5, atol=1e-6)
 
 
-def _one_line_error(capsys, status):
-    out, err = capsys.readouterr()
-    assert status == 2, err
-    lines = err.strip().splitlines()
-    assert len(lines) == 1 and "Traceback" not in err, err
-    return lines[0]
 
-
-def test_refusals_name_the_option(record, tmp_path, capsys):
+def test_refusals_name_the_option(record, tmp_path, one_line_error):
     path, geo = record
-    err = _one_line_error(capsys, main(["identify", str(path), "--out", str(tmp_path / "m.uff"), *ARGS]))
+    err = one_line_error(main(["identify", str(path), "--out", str(tmp_path / "m.uff"), *ARGS]))
     assert "--out" in err and "give --geometry" in err
-    err = _one_line_error(capsys, main(["identify", str(path), "--report", str(tmp_path / "r.pdf"), *ARGS]))
+    err = one_line_error(main(["identify", str(path), "--report", str(tmp_path / "r.pdf"), *ARGS]))
     assert "--report" in err and ".html" in err
     bad = tmp_path / "bad.toml"
     bad.write_text(GEOMETRY.replace("node = 4", "node = 9"), encoding="utf-8")
-    err = _one_line_error(capsys, main(["identify", str(path), "--geometry", str(bad), *ARGS]))
+    err = one_line_error(main(["identify", str(path), "--geometry", str(bad), *ARGS]))
     assert "--geometry" in err and "channel 'm5': unknown node 9" in err
     other = tmp_path / "other.toml"
     other.write_text(GEOMETRY.replace('name = "m5"', 'name = "m9"'), encoding="utf-8")
-    err = _one_line_error(capsys, main(["identify", str(path), "--geometry", str(other), *ARGS]))
+    err = one_line_error(main(["identify", str(path), "--geometry", str(other), *ARGS]))
     assert "--geometry" in err and "'m5' is not a channel of the geometry" in err
