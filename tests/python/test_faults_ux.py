@@ -122,6 +122,25 @@ def test_a_dead_channel_is_named(chain_10k):
     assert any("'acc2'" in w and "constant" in w for w in a.warnings)
 
 
+@pytest.mark.parametrize("n_samples", [1, 2, 63, 64, 65, 1000, 4097])
+def test_constant_channels_equal_the_sample_by_sample_comparison(n_samples):
+    # the fast path looks at 64 spread rows first: a channel that differs only between them
+    # (or only in its last sample) must not be called constant
+    from modaluq.checks import constant_channels
+
+    rng = np.random.default_rng(n_samples)
+    x = rng.standard_normal((n_samples, 6))
+    x[:, 1] = 3.0
+    x[:, 2] = 0.0
+    x[:, 3] = -1.5
+    x[n_samples // 2 + (1 if n_samples > 2 else 0) - 1, 3] = -1.5 + 1e-12  # one sample off, between the spread rows
+    x[:, 4] = 7.0
+    x[-1, 4] = np.nan
+    reference = np.flatnonzero(np.all(x == x[:1], axis=0)).tolist()
+    assert constant_channels(x) == reference
+    assert set(reference) >= {1, 2} and 4 not in reference
+
+
 def test_a_record_of_dead_channels_is_refused(chain_10k):
     y = np.full((chain_10k.y.shape[0], 3), 2.5)
     with pytest.raises(ValueError, match="every output is constant"):
