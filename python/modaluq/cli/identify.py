@@ -364,7 +364,8 @@ def register(subparsers) -> argparse.ArgumentParser:
     p = subparsers.add_parser(
         "identify",
         help="identify modes with their uncertainty from a measurement file",
-        description="Load a measurement file, run covariance-driven SSI over a range of model "
+        description="Load a measurement file (or, with --setups, a campaign measured in several setups, "
+                    "merged into global mode shapes), run covariance-driven SSI over a range of model "
                     "orders with the analytic standard deviation of every modal parameter, build "
                     "the stabilization diagram, select the physical modes automatically and print "
                     "them with their standard deviations. Errors are one line and exit status 2.",
