@@ -325,8 +325,8 @@ def run_setups(args, t_start: float) -> int:
         analysis = CampaignAnalysis.from_campaign(campaign, fs=args.fs, references=args.references,
                                                   inputs=args.inputs, criteria=criteria, clustering=clustering,
                                                   **keywords)
-    except ValueError as exc:
-        raise option_error(exc, options) from None
+    except ValueError as exc:  # the file's [settings] named as written there, the options as typed
+        raise (exc if str(exc).startswith(campaign.source) else option_error(exc, options)) from None
     names = analysis.output_names
     if geometry is not None and len(set(names)) == len(names):  # (else the identification names the setup)
         try:  # every global DOF on the geometry, before the identification

@@ -117,3 +117,19 @@ def test_file_and_setups_exclude_each_other(campaign_file, tmp_path, capsys):
     setup1 = campaign_file.parent / "setup1.csv"
     assert main(["identify", "--setups", str(campaign_file), *FAST, "--out", str(setup1), "--overwrite"]) == 2
     assert f"--out {setup1} is the input file" in capsys.readouterr().err
+
+
+def test_the_files_settings_are_named_as_written_and_geometry_is_replaced(campaign_file, tmp_path, capsys):
+    bad = tmp_path / "bad.toml"
+    bad.write_text(campaign_file.read_text().replace("block_rows = 20", "block_rows = 1"))
+    for name in [f"setup{j}.csv" for j in range(1, 7)]:
+        (tmp_path / name).symlink_to(campaign_file.parent / name)
+    assert main(["identify", "--setups", str(bad), "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert f"{bad}: [settings]: block_rows" in err and "--block-rows" not in err
+    # --geometry replaces the campaign's: a geometry without R12 is refused before the identification
+    geo = tmp_path / "geo.toml"
+    geo.write_text((ROOT / "examples/geometry/deck_campaign.toml").read_text().replace('name = "R12"', 'name = "R13"'))
+    assert main(["identify", "--setups", str(campaign_file), *FAST, "--geometry", str(geo)]) == 2
+    err = capsys.readouterr().err
+    assert f"geometry {geo}:" in err and "R12" in err
