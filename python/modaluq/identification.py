@@ -8,6 +8,8 @@ core's result in a :class:`~modaluq.Result`.
 
 from __future__ import annotations
 
+import math
+import os
 from typing import Sequence
 
 import numpy as np
@@ -23,6 +25,8 @@ from .checks import (
     constant_channels,
     naming_settings_on_memory_error,
 )
+from .io import Recording, load
+from .io.campaign import Campaign, load_campaign
 from .preprocess import preprocess
 from .results import Result, result_from_core, warn_all
 from .settings import Settings
@@ -205,8 +209,8 @@ def _output_names(output_names, y) -> tuple:
     return tuple(str(c) for c in columns) if columns is not None and getattr(y, "ndim", 0) == 2 else ()
 
 
-def identify_setups(setups, *, fs, references: Sequence[str], inputs: Sequence[str] | None = None,
-                    settings: Settings | None = None, **keywords) -> Result:
+def identify_setups(setups, *, fs=None, references: Sequence[str] | None = None,
+                    inputs: Sequence[str] | None = None, settings: Settings | None = None, **keywords) -> Result:
     """Identify a campaign measured in several setups, merged into global mode shapes with their σ.
 
     The modular merge of Döhler & Mevel (2012) with the first-order covariance of Döhler, Lam &
@@ -220,11 +224,18 @@ def identify_setups(setups, *, fs, references: Sequence[str], inputs: Sequence[s
 
     Parameters
     ----------
-    setups : sequence of pandas.DataFrame
-        One record per setup, shape (n_samples_j, n_channels_j), columns the channel names.
-        Records may have different lengths and channels; the references must be in every one.
-    fs : float or sequence of float
+    setups : sequence of records, or a campaign
+        One record per setup, each a pandas DataFrame (shape (n_samples_j, n_channels_j),
+        columns the channel names), a :class:`modaluq.io.Recording` (its output and input names,
+        its rate; its inputs are inputs) or a file path (read by :func:`modaluq.io.load`). Records
+        may have different lengths and channels; the references must be in every one. Or a
+        :class:`modaluq.io.Campaign` (:func:`modaluq.io.load_campaign`) or the path of a campaign
+        file (``.toml``, docs/multisetup.md): its setups, references, inputs, fs and
+        ``[settings]``, the arguments given here replacing them.
+    fs : float or sequence of float, optional
         Sampling frequency in Hz, the same for every setup (a sequence is checked to be constant).
+        Optional when every setup carries its rate (recordings, files); a setup whose own rate
+        differs from ``fs`` is a ValueError naming it.
     references : sequence of str
         Names of the reference channels, measured in every setup (the past channels of each).
     inputs : sequence of str, optional
@@ -241,56 +252,23 @@ def identify_setups(setups, *, fs, references: Sequence[str], inputs: Sequence[s
     ValueError
         A reference missing from a setup, different sampling frequencies, a channel (not a
         reference) measured in two setups, a setup without outputs, or settings the merge
-        cannot use.
+        cannot use. Each names the setup.
+    TypeError
+        A setup that is none of the records above (named), or a single string of references.
     """
-    setups = list(setups)
-    if not setups:
-        raise ValueError("setups must hold at least one record")
-    fss = np.atleast_1d(np.asarray(fs, dtype=float))
-    if fss.size not in (1, len(setups)):
-        raise ValueError(f"fs must be one rate or one per setup ({len(setups)}); got {fss.size}")
-    if np.any(fss != fss[0]):
-        k = int(np.flatnonzero(fss != fss[0])[0])
-        raise ValueError(f"setup {k} has fs = {fss[k]} Hz but setup 0 has {fss[0]} Hz: "
-                         "every setup must be sampled at the same rate (resample first)")
-    fs = check_sampling_frequency(float(fss[0]))
-    if isinstance(references, str):
-        raise TypeError("references must be a sequence of channel names, not a single string")
-    refs = [str(r) for r in references]
-    if not refs:
-        raise ValueError("references must name at least one reference channel")
-    if len(set(refs)) != len(refs):
-        raise ValueError(f"references has a repeated name: {refs}")
-    input_names = set() if inputs is None else {str(n) for n in inputs}
-    if input_names & set(refs):
-        raise ValueError(f"references and inputs share {sorted(input_names & set(refs))}")
-    s = make_settings(settings, keywords, function="identify_setups")
+    if isinstance(setups, (str, os.PathLike)) and str(setups).lower().endswith(".toml"):
+        setups = load_campaign(setups)
+    base = settings
+    if isinstance(setups, Campaign):
+        try:  # the file's [settings], checked where they are used; the message names the file
+            base = make_settings(settings, dict(setups.settings), function="identify_setups")
+        except (TypeError, ValueError) as exc:
+            raise ValueError(f"{setups.source or 'campaign'}: [settings]: {exc}") from None
+    s = make_settings(base, keywords, function="identify_setups")
     if s.references is not None:
         raise TypeError("identify_setups takes the references by name (references=[...]), not as Settings.references")
-
-    records, dof_names, seen = [], list(refs), {}
-    for j, rec in enumerate(setups):
-        columns = getattr(rec, "columns", None)
-        if columns is None:
-            raise TypeError(f"setups[{j}] must be a pandas.DataFrame whose columns are channel names; "
-                            f"got {type(rec).__name__}")
-        names = [str(c) for c in columns]
-        missing = [r for r in refs if r not in names]
-        if missing:
-            raise ValueError(f"setup {j} lacks the reference channel(s) {missing} (its channels: {names})")
-        outs = [c for c in names if c not in input_names]
-        ins = [c for c in names if c in input_names]
-        moving = [c for c in outs if c not in refs]
-        for c in moving:
-            if c in seen:
-                raise ValueError(f"channel {c!r} is measured in setups {seen[c]} and {j} but is not a reference: "
-                                 "declare it in references or rename one")
-            seen[c] = j
-        dof_names += moving
-        # references first (the past channels, in the global order), then the moving channels
-        y = as_samples(rec[refs + moving].to_numpy(dtype=float), f"setups[{j}]")
-        u = as_samples(rec[ins].to_numpy(dtype=float), f"setups[{j}] inputs") if ins else None
-        records.append((y, u, len(moving)))
+    records, rate, refs, dof_names = _campaign_records(setups, fs, references, inputs)
+    fs = rate
 
     rate, band = fs, None
     if s.preprocessing:
@@ -329,3 +307,123 @@ def identify_setups(setups, *, fs, references: Sequence[str], inputs: Sequence[s
     result = result_from_core(ident, record, l_g, n_in, output_names=dof_names)
     warn_all(result)
     return result
+
+
+def _campaign_records(setups, fs, references, inputs) -> tuple:
+    """The setups of :func:`identify_setups` as ``(records, fs, references, dof_names)``:
+    ``records`` one ``(y, u, n_moving)`` per setup, y's columns the references then the setup's
+    other outputs. Every error names the setup (its index, and its name or file when known)."""
+    labels = None
+    if isinstance(setups, (str, os.PathLike)):
+        raise TypeError(f"setups must be a list of records (one per setup) or a campaign file (.toml); got the "
+                            f"single path {str(setups)!r}")
+    if isinstance(setups, Campaign):
+        labels = [f"setup {j} ({name!r})" for j, name in enumerate(setups.names)]
+        fs = setups.fs if fs is None else fs
+        references = setups.references if references is None else references
+        inputs = (setups.inputs or None) if inputs is None else inputs
+        setups = setups.setups
+    if isinstance(setups, (Recording,)) or getattr(setups, "columns", None) is not None:
+        raise TypeError("setups must be a list of records, one per setup; got a single "
+                        f"{type(setups).__name__} (wrap it in a list)")
+    try:
+        setups = list(setups)
+    except TypeError:
+        raise TypeError(f"setups must be a list of records (DataFrames, modaluq.io Recordings or file paths); "
+                        f"got {type(setups).__name__}") from None
+    if not setups:
+        raise ValueError("setups must hold at least one record")
+    named = labels is not None
+    if labels is None:
+        labels = [f"setup {j}" for j in range(len(setups))]
+    if references is None:
+        raise TypeError("identify_setups() needs references=[...]: the names of the reference channels")
+    if isinstance(references, str):
+        raise TypeError("references must be a sequence of channel names, not a single string")
+    refs = [str(r) for r in references]
+    if not refs:
+        raise ValueError("references must name at least one reference channel")
+    if len(set(refs)) != len(refs):
+        raise ValueError(f"references has a repeated name: {refs}")
+    if isinstance(inputs, str):
+        raise TypeError("inputs must be a sequence of channel names, not a single string")
+    input_names = set() if inputs is None else {str(n) for n in inputs}
+    if input_names & set(refs):
+        raise ValueError(f"references and inputs share {sorted(input_names & set(refs))}")
+
+    given = None
+    if fs is not None:
+        given = np.atleast_1d(np.asarray(fs, dtype=float))
+        if given.ndim != 1 or given.size not in (1, len(setups)):
+            raise ValueError(f"fs must be one rate or one per setup ({len(setups)}); got {given.size}")
+    # each setup as (names, columns, its declared inputs, its own rate or None)
+    tables = []
+    for j, rec in enumerate(setups):
+        fs_j = None if given is None else float(given[0 if given.size == 1 else j])
+        if isinstance(rec, (str, os.PathLike)):
+            try:
+                rec = load(rec)
+            except ValueError:
+                if fs_j is None:
+                    raise
+                rec = load(rec, fs=fs_j)  # a file that states no rate: fs is its rate
+        if isinstance(rec, Recording):
+            if rec.source and not named:
+                labels[j] += f" ({rec.source})"
+            names = list(rec.output_names) + list(rec.input_names)
+            data = rec.y if rec.u is None else np.hstack([rec.y, rec.u])
+            tables.append((names, data, set(rec.input_names), float(rec.fs)))
+        elif getattr(rec, "columns", None) is not None and hasattr(rec, "to_numpy"):
+            tables.append(([str(c) for c in rec.columns], rec, set(), None))
+        else:
+            raise TypeError(f"{labels[j]} must be a pandas.DataFrame whose columns are channel names, a "
+                            f"modaluq.io.Recording or a file path; got {type(rec).__name__}")
+    rates = []
+    for j, (_, _, _, own) in enumerate(tables):
+        fs_j = None if given is None else float(given[0 if given.size == 1 else j])
+        if own is not None and fs_j is not None and not math.isclose(own, fs_j, rel_tol=1e-9):
+            raise ValueError(f"{labels[j]} is sampled at {own:g} Hz but fs = {fs_j:g} Hz: every setup must have "
+                             "the same rate (resample it, or correct fs)")
+        rate = fs_j if fs_j is not None else own
+        if rate is None:
+            raise ValueError(f"{labels[j]} is a DataFrame, which carries no rate: give fs")
+        rates.append(rate)
+    for j, rate in enumerate(rates):
+        if not math.isclose(rate, rates[0], rel_tol=1e-9):
+            raise ValueError(f"{labels[j]} has fs = {rate} Hz but {labels[0]} has {rates[0]} Hz: "
+                             "every setup must be sampled at the same rate (resample first)")
+    rate = check_sampling_frequency(rates[0])
+
+    records, dof_names, seen = [], list(refs), {}
+    for j, (names, data, declared, _) in enumerate(tables):
+        twice = sorted({c for c in names if names.count(c) > 1})
+        if twice:
+            raise ValueError(f"{labels[j]} has more than one channel named {twice[0]!r}")
+        missing = [r for r in refs if r not in names]
+        if missing:
+            raise ValueError(f"{labels[j]} lacks the reference channel(s) {missing} (its channels: {names})")
+        is_input = declared | input_names
+        as_input = [r for r in refs if r in declared]
+        if as_input:
+            raise ValueError(f"{labels[j]}: the reference {as_input[0]!r} is an input of the record")
+        outs = [c for c in names if c not in is_input]
+        ins = [c for c in names if c in is_input]
+        moving = [c for c in outs if c not in refs]
+        for c in moving:
+            if c in seen:
+                raise ValueError(f"channel {c!r} is measured in setups {labels[seen[c]].removeprefix('setup ')} "
+                                 f"and {labels[j].removeprefix('setup ')} but is not a reference: declare it in "
+                                 "references or rename one")
+            seen[c] = j
+        dof_names += moving
+        # references first (the past channels, in the global order), then the moving channels
+        if isinstance(data, np.ndarray):
+            col = {c: k for k, c in enumerate(names)}
+            y_raw, u_raw = data[:, [col[c] for c in refs + moving]], data[:, [col[c] for c in ins]] if ins else None
+        else:
+            y_raw = data[refs + moving].to_numpy(dtype=float)
+            u_raw = data[ins].to_numpy(dtype=float) if ins else None
+        y = as_samples(y_raw, f"setups[{j}]")
+        u = as_samples(u_raw, f"setups[{j}] inputs") if ins else None
+        records.append((y, u, len(moving)))
+    return records, rate, refs, dof_names

@@ -74,3 +74,97 @@ def test_refusals(campaign):
     with pytest.raises(ValueError, match="channel 'L1' is measured in setups 0 and 1"):
         modaluq.identify_setups([frames[0], frames[0]], fs=campaign.fs, references=["L3", "R8"], block_rows=10,
                                 orders=[12], n_blocks=12)
+
+
+# --------------------------------------------------------------------------- recordings, files, campaigns
+
+SMALL = dict(block_rows=10, orders=[12], n_blocks=12)
+
+
+def _recordings(camp, io=False):
+    from modaluq.io import Recording
+
+    return [Recording(y=s.y, u=s.u if io else None, fs=camp.fs, output_names=s.channels,
+                      input_names=("F5",) if io else (), source=f"rec{j}") for j, s in enumerate(camp.setups)]
+
+
+def _write_csvs(camp, folder, n=3):
+    paths = []
+    for j, s in enumerate(camp.setups[:n]):
+        t = np.arange(s.y.shape[0]) / camp.fs
+        p = folder / f"s{j}.csv"
+        np.savetxt(p, np.column_stack([t, s.y]), delimiter=",", header=",".join(["time", *s.channels]),
+                   comments="", fmt="%.10g")
+        paths.append(p)
+    return paths
+
+
+def test_recordings_and_files_give_the_dataframes_result(campaign, tmp_path):
+    frames = _frames(campaign)[:3]
+    ref = modaluq.identify_setups(frames, fs=campaign.fs, references=["L3", "R8"], **SMALL)
+    # Recordings carry their rate: fs may be left out
+    recs = _recordings(campaign)[:3]
+    by_rec = modaluq.identify_setups(recs, references=["L3", "R8"], **SMALL)
+    assert by_rec.output_names == ref.output_names
+    np.testing.assert_allclose(by_rec.at_order(12).frequency_hz, ref.at_order(12).frequency_hz, rtol=1e-12)
+    np.testing.assert_allclose(by_rec.at_order(12).frequency_std, ref.at_order(12).frequency_std, rtol=1e-12)
+    # files (CSV with a time column: their own rate), mixed with a DataFrame given fs
+    paths = _write_csvs(campaign, tmp_path)
+    mixed = modaluq.identify_setups([paths[0], str(paths[1]), frames[2]], fs=campaign.fs, references=["L3", "R8"],
+                                    **SMALL)
+    assert mixed.output_names == ref.output_names
+    np.testing.assert_allclose(mixed.at_order(12).frequency_hz, ref.at_order(12).frequency_hz, rtol=1e-6)
+
+
+def test_recording_inputs_are_inputs():
+    camp = simulate_campaign(6, durations=(90.0, 100.0, 80.0), roving=(("L1", "L2", "L4", "L5"),
+                             ("L6", "L7", "L8", "L9"), ("R2", "R3", "R4", "R5")),
+                             input_dofs=("L5",), input_std=3.0, unknown_input_std=0.5)
+    by_frames = modaluq.identify_setups(_frames(camp, io=True), fs=camp.fs, references=["L3", "R8"],
+                                        inputs=["F5"], **SMALL)
+    by_recs = modaluq.identify_setups(_recordings(camp, io=True), references=["L3", "R8"], **SMALL)
+    assert by_recs.n_inputs == 1 and by_recs.output_names == by_frames.output_names
+    np.testing.assert_allclose(by_recs.at_order(12).frequency_hz, by_frames.at_order(12).frequency_hz, rtol=1e-12)
+
+
+def test_rates_and_types_are_checked_per_setup(campaign):
+    from modaluq.io import Recording
+
+    recs = _recordings(campaign)[:3]
+    odd = Recording(y=recs[1].y, u=None, fs=50.0, output_names=recs[1].output_names, source="odd.csv")
+    with pytest.raises(ValueError, match=r"setup 1 \(odd.csv\) is sampled at 50 Hz but fs = 25 Hz"):
+        modaluq.identify_setups([recs[0], odd, recs[2]], fs=25.0, references=["L3", "R8"], **SMALL)
+    with pytest.raises(ValueError, match=r"setup 1 \(odd.csv\) has fs = 50.0 Hz but setup 0 \(rec0\) has 25.0"):
+        modaluq.identify_setups([recs[0], odd, recs[2]], references=["L3", "R8"], **SMALL)
+    with pytest.raises(ValueError, match="setup 2 is a DataFrame, which carries no rate: give fs"):
+        modaluq.identify_setups([recs[0], recs[1], _frames(campaign)[2]], references=["L3", "R8"], **SMALL)
+    with pytest.raises(TypeError, match="setup 1 must be a pandas.DataFrame .* got ndarray"):
+        modaluq.identify_setups([recs[0], recs[1].y], references=["L3", "R8"], **SMALL)
+    with pytest.raises(TypeError, match="single DataFrame"):
+        modaluq.identify_setups(_frames(campaign)[0], fs=25.0, references=["L3", "R8"], **SMALL)
+    with pytest.raises(TypeError, match="campaign file"):
+        modaluq.identify_setups("setup1.csv", fs=25.0, references=["L3", "R8"], **SMALL)
+    with pytest.raises(TypeError, match="references"):
+        modaluq.identify_setups(recs, **SMALL)
+    twice = pd.concat([_frames(campaign)[0], _frames(campaign)[0][["L1"]]], axis=1)
+    with pytest.raises(ValueError, match="setup 0 has more than one channel named 'L1'"):
+        modaluq.identify_setups([twice], fs=25.0, references=["L3", "R8"], **SMALL)
+
+
+def test_a_campaign_file_is_a_setups_argument(campaign, tmp_path):
+    from modaluq.io import load_campaign
+
+    _write_csvs(campaign, tmp_path)
+    (tmp_path / "c.toml").write_text(
+        'references = ["L3", "R8"]\nfs = 25.0\n[settings]\nblock_rows = 10\norders = [12]\nn_blocks = 12\n'
+        + "".join(f'[[setup]]\nfile = "s{j}.csv"\n' for j in range(3)))
+    ref = modaluq.identify_setups(_frames(campaign)[:3], fs=campaign.fs, references=["L3", "R8"], **SMALL)
+    by_path = modaluq.identify_setups(tmp_path / "c.toml")
+    by_obj = modaluq.identify_setups(load_campaign(tmp_path / "c.toml"), orders=[10, 12])  # keywords win
+    assert by_path.output_names == ref.output_names == by_obj.output_names
+    np.testing.assert_allclose(by_path.at_order(12).frequency_hz, ref.at_order(12).frequency_hz, rtol=1e-6)
+    assert list(by_obj.orders) == [10, 12]
+    (tmp_path / "bad.toml").write_text('references = ["L3", "R8"]\n[settings]\nblok_rows = 10\n'
+                                       '[[setup]]\nfile = "s0.csv"\n')
+    with pytest.raises(ValueError, match=r"bad.toml: \[settings\]: .*'blok_rows'"):
+        modaluq.identify_setups(tmp_path / "bad.toml")

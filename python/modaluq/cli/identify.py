@@ -20,11 +20,12 @@ from ..analysis import Analysis
 from ..checks import require
 from ..exchange import std_path_of
 from ..io import SUPPORTED_EXTENSIONS
+from ..spectrum import output_spectrum_singular_values
 from ..version import __version__
 from .common import CliError, check_image_paths, check_output_paths, integer_option, option_error, real_option
-from .options import add_analysis_options, analysis_settings, stated_options
+from .options import SETTINGS_OPTIONS, add_analysis_options, analysis_settings, stated_options
 
-__all__ = ["parse_orders", "parse_read_options", "register", "run"]
+__all__ = ["parse_orders", "parse_read_options", "register", "run", "run_setups"]
 
 
 #: Largest --dpi: a 9 x 6 inch diagram is then 10800 x 7200 pixels.
@@ -124,11 +125,13 @@ def parse_read_options(items) -> dict:
 UFF_EXTENSIONS = (".uff", ".unv")
 
 
-def _check_outputs(args):
-    """Fail fast (before any computation) on an unsupported, unwritable or destructive output path."""
+def _check_outputs(args, has_geometry: bool = False, inputs=()):
+    """Fail fast (before any computation) on an unsupported, unwritable or destructive output path.
+    ``has_geometry``: a geometry comes from elsewhere than --geometry (a campaign file); ``inputs``:
+    files read besides FILE or the campaign file (a campaign's setups), never overwritten."""
     for p in args.out or []:
         if Path(p).suffix.lower() in UFF_EXTENSIONS:
-            if not args.geometry:
+            if not (args.geometry or has_geometry):
                 raise ValueError(f"--out {p}: a UFF file places the modes on a geometry: give --geometry")
             require("pyuff", f"--out {p}")
             continue
@@ -151,7 +154,8 @@ def _check_outputs(args):
         parent = Path(p).resolve().parent
         if not parent.is_dir():
             raise OSError(f"{p}: directory {parent} does not exist")
-    check_output_paths(outputs, [args.file], overwrite=args.overwrite)
+    sources = ([args.file] if args.file else [args.setups]) + list(inputs)
+    check_output_paths(outputs, sources, overwrite=args.overwrite)
     check_image_paths((("--plot", args.plot), ("--plot-shapes", args.plot_shapes)))
 
 
@@ -160,6 +164,10 @@ def run(args) -> int:
     from tqdm.auto import tqdm
 
     t_start = time.perf_counter()
+    if (args.file is None) == (args.setups is None):
+        raise CliError("give a measurement FILE or --setups CAMPAIGN (a campaign file), not both or neither")
+    if args.setups is not None:
+        return run_setups(args, t_start)
     _check_outputs(args)
     geometry = None
     if args.geometry:
@@ -208,46 +216,61 @@ def run(args) -> int:
         except NumericalError as exc:
             raise CliError(f"numerical failure in the identification: {exc}") from None
 
-        if args.plot:
-            step("plotting the diagram")
-            from ..plot import plot_stabilization_diagram  # matplotlib only when a plot is asked for
+        pre = analysis.preprocessed
+        written = _write_outputs(
+            args, analysis, geometry, step, background=lambda: {"y": pre.y},
+            spectrum=lambda: output_spectrum_singular_values(pre.y, pre.fs, nperseg=args.nperseg),
+            stamp=lambda: analysis.provenance(cli_arguments=stated_options(args, criteria, clustering)),
+            title=f"modaluq identify {Path(args.file).name}")
+    _print_run(analysis, args.file, written, t_start)
+    return 0
 
-            fig = plot_stabilization_diagram(analysis.diagram, y=analysis.preprocessed.y, selected=analysis.selected,
-                                             nperseg=args.nperseg)
-            fig.savefig(args.plot, dpi=args.dpi)
-            written.append(args.plot)
-        if args.plot_shapes and analysis.selected.n_modes:
-            step("plotting the mode shapes")
-            analysis.selected.plot().savefig(args.plot_shapes, dpi=args.dpi)
-            written.append(args.plot_shapes)
-        if args.out or args.report:
-            stamp = analysis.provenance(cli_arguments=stated_options(args, criteria, clustering))
-        for p in args.out or []:
-            step(f"writing {Path(p).name}")
-            try:
-                if Path(p).suffix.lower() in UFF_EXTENSIONS:
-                    from ..exchange import write_uff
 
-                    written += [str(w) for w in write_uff(p, analysis.selected, geometry)]
-                    continue
-                export.write(p, analysis.diagram, analysis.selected, stamp=stamp, extra=analysis.report())
-            except ImportError as exc:
-                raise CliError(f"--out {p}: {exc}") from None
-            written.append(p)
-        if args.report:
-            step(f"writing {Path(args.report).name}")
-            from ..htmlreport import write_html_report
-            from ..spectrum import output_spectrum_singular_values
+def _write_outputs(args, analysis, geometry, step, *, background, spectrum, stamp, title) -> list:
+    """The plots, --out files and --report of a run (an :class:`Analysis` or a
+    :class:`CampaignAnalysis`: the same diagram and selected modes); the paths written.
+    ``background()`` gives the diagram plot's spectrum keyword, ``spectrum()`` the report's."""
+    written = []
+    if args.plot:
+        step("plotting the diagram")
+        from ..plot import plot_stabilization_diagram  # matplotlib only when a plot is asked for
 
-            pre = analysis.preprocessed
-            write_html_report(args.report, analysis.diagram, analysis.selected, geometry=geometry,
-                              spectrum=output_spectrum_singular_values(pre.y, pre.fs, nperseg=args.nperseg),
-                              title=f"modaluq identify {Path(args.file).name}",
-                              run_description=analysis.describe_run() + "\n\n" + analysis.describe_modes(),
-                              warnings=analysis.warnings, stamp=stamp)
-            written.append(args.report)
+        fig = plot_stabilization_diagram(analysis.diagram, selected=analysis.selected, nperseg=args.nperseg,
+                                         **background())
+        fig.savefig(args.plot, dpi=args.dpi)
+        written.append(args.plot)
+    if args.plot_shapes and analysis.selected.n_modes:
+        step("plotting the mode shapes")
+        analysis.selected.plot().savefig(args.plot_shapes, dpi=args.dpi)
+        written.append(args.plot_shapes)
+    if args.out or args.report:
+        stamp = stamp()
+    for p in args.out or []:
+        step(f"writing {Path(p).name}")
+        try:
+            if Path(p).suffix.lower() in UFF_EXTENSIONS:
+                from ..exchange import write_uff
 
-    print(f"modaluq {__version__} identify: {args.file}")
+                written += [str(w) for w in write_uff(p, analysis.selected, geometry)]
+                continue
+            export.write(p, analysis.diagram, analysis.selected, stamp=stamp, extra=analysis.report())
+        except ImportError as exc:
+            raise CliError(f"--out {p}: {exc}") from None
+        written.append(p)
+    if args.report:
+        step(f"writing {Path(args.report).name}")
+        from ..htmlreport import write_html_report
+
+        write_html_report(args.report, analysis.diagram, analysis.selected, geometry=geometry,
+                          spectrum=spectrum(), title=title,
+                          run_description=analysis.describe_run() + "\n\n" + analysis.describe_modes(),
+                          warnings=analysis.warnings, stamp=stamp)
+        written.append(args.report)
+    return written
+
+
+def _print_run(analysis, source, written, t_start) -> None:
+    print(f"modaluq {__version__} identify: {source}")
     print(analysis.describe_run())
     for w in analysis.warnings:
         print(f"modaluq identify: warning: {w}", file=sys.stderr)
@@ -256,6 +279,83 @@ def run(args) -> int:
     for p in written:
         print(f"wrote {p}")
     print(f"({time.perf_counter() - t_start:.1f} s)")
+
+
+#: Options of one record that a campaign file states per setup (or that do not apply to a merge).
+NOT_WITH_SETUPS = (("outputs", "--outputs", "a campaign's outputs are every channel of its setups but the inputs"),
+                   ("format", "--format", "give a setup's format in its [[setup]] entry"),
+                   ("read_option", "--read-option", "give a setup's reader options in its [[setup]] entry"),
+                   ("check_horizons", "--check-horizons", "the horizon check is for one record"))
+
+
+def run_setups(args, t_start: float) -> int:
+    """``modaluq identify --setups campaign.toml``: the campaign merged (identify_setups), then the
+    same outputs as one record's."""
+    from tqdm.auto import tqdm
+
+    from ..campaign_analysis import CampaignAnalysis
+    from ..io import load_campaign
+
+    for name, option, why in NOT_WITH_SETUPS:
+        if getattr(args, name):
+            raise CliError(f"{option} does not apply with --setups: {why}")
+    settings, criteria, clustering = analysis_settings(args)  # checks the options, names them
+    keywords = {name: getattr(settings, name) for name in SETTINGS_OPTIONS if getattr(args, name) is not None}
+    if args.no_uncertainty:
+        keywords["uncertainty"] = False
+    if args.orders is not None:
+        keywords["orders"] = parse_orders(args.orders)
+    options = set(vars(args))
+    try:
+        campaign = load_campaign(args.setups)
+    except (ValueError, OSError) as exc:
+        raise CliError(f"--setups {args.setups}: {exc}") from None
+    _check_outputs(args, has_geometry=campaign.geometry is not None,
+                   inputs=[rec.source for rec in campaign.setups if rec.source])
+    geometry, geometry_path = None, args.geometry or campaign.geometry
+    if geometry_path:
+        from ..geometry import Geometry
+
+        try:
+            geometry = Geometry.from_file(geometry_path)
+        except (OSError, ValueError) as exc:
+            raise CliError(f"{'--geometry' if args.geometry else 'the campaign geometry'} {geometry_path}: {exc}") \
+                from None
+    try:
+        analysis = CampaignAnalysis.from_campaign(campaign, fs=args.fs, references=args.references,
+                                                  inputs=args.inputs, criteria=criteria, clustering=clustering,
+                                                  **keywords)
+    except ValueError as exc:  # the file's [settings] named as written there, the options as typed
+        raise (exc if str(exc).startswith(campaign.source) else option_error(exc, options)) from None
+    names = analysis.output_names
+    if geometry is not None and len(set(names)) == len(names):  # (else the identification names the setup)
+        try:  # every global DOF on the geometry, before the identification
+            geometry.channel_order(names)
+        except ValueError as exc:
+            raise CliError(f"geometry {geometry_path}: {exc}") from None
+
+    n_steps = 3 + bool(args.plot) + bool(args.plot_shapes) + len(args.out or []) + bool(args.report)
+    progress = tqdm(total=n_steps, desc=f"loading {Path(args.setups).name}", unit="step", file=sys.stderr,
+                    leave=False, disable=True if args.no_progress else None,
+                    bar_format="{desc}: {n}/{total} steps [{elapsed}]")
+
+    def step(description: str) -> None:
+        progress.set_description_str(description)
+        progress.update()
+
+    with progress:
+        try:
+            analysis.run(progress=step, issue_warnings=False)
+        except ValueError as exc:
+            raise option_error(exc, options) from None
+        except NumericalError as exc:
+            raise CliError(f"numerical failure in the identification: {exc}") from None
+        written = _write_outputs(
+            args, analysis, geometry, step, background=lambda: {"spectrum": analysis.spectrum(args.nperseg)},
+            spectrum=lambda: analysis.spectrum(args.nperseg),
+            stamp=lambda: analysis.provenance(cli_arguments=stated_options(args, criteria, clustering)),
+            title=f"modaluq identify --setups {Path(args.setups).name}")
+    _print_run(analysis, args.setups, written, t_start)
     return 0
 
 
@@ -264,15 +364,24 @@ def register(subparsers) -> argparse.ArgumentParser:
     p = subparsers.add_parser(
         "identify",
         help="identify modes with their uncertainty from a measurement file",
-        description="Load a measurement file, run covariance-driven SSI over a range of model "
+        description="Load a measurement file (or, with --setups, a campaign measured in several setups, "
+                    "merged into global mode shapes), run covariance-driven SSI over a range of model "
                     "orders with the analytic standard deviation of every modal parameter, build "
                     "the stabilization diagram, select the physical modes automatically and print "
                     "them with their standard deviations. Errors are one line and exit status 2.",
         epilog="Channels are given by name or 0-based index (a name wins). Criteria are fractions: "
                "0.01 = 1 %%. Example: modaluq identify run1.csv --inputs force --orders 2:60:2 "
-               "--plot diagram.png --out modes.json --out diagram.nc",
+               "--plot diagram.png --out modes.json --out diagram.nc. A campaign in several setups: "
+               "modaluq identify --setups campaign.toml --out modes.json (docs/multisetup.md); the options "
+               "then replace the campaign file's references, inputs, fs, geometry and [settings].",
     )
-    p.add_argument("file", help=f"measurement file ({' '.join(SUPPORTED_EXTENSIONS)})")
+    src = p.add_mutually_exclusive_group()
+    src.add_argument("file", nargs="?", default=None,
+                     help=f"measurement file ({' '.join(SUPPORTED_EXTENSIONS)}); or --setups")
+    src.add_argument("--setups", metavar="CAMPAIGN", default=None,
+                     help="a campaign file (TOML: references and one [[setup]] entry per setup with its file; "
+                          "docs/multisetup.md) instead of FILE: the setups are merged into global mode shapes "
+                          "with their sigma (modaluq.identify_setups) and written as for one record")
     add_analysis_options(p)
     g = p.add_argument_group("output")
     g.add_argument("--plot", metavar="IMAGE", default=None,

@@ -21,7 +21,7 @@ from .recording import Recording
 __all__ = ["Recording", "RecordingFileError", "load", "FileFormat", "FILE_FORMATS", "SUPPORTED_EXTENSIONS",
            "FORMATS", "PARSE_TIMEOUT",
            "read_csv", "read_numpy", "read_npy", "read_npz", "read_matlab", "read_hdf5",
-           "read_uff", "read_tdms", "from_sep005", "to_sep005"]
+           "read_uff", "read_tdms", "from_sep005", "to_sep005", "Campaign", "load_campaign"]
 
 #: Time limit (s) for one file parsed in an isolated child process (MATLAB, HDF5 readers with
 #: ``isolate=True``, the default), plus one second per 50 MB of file; a small file gets less
@@ -63,7 +63,8 @@ SUPPORTED_EXTENSIONS = {ext: f.name for f in FILE_FORMATS for ext in f.extension
 
 # reader name -> module, imported on first use
 _LAZY = {**{f.reader: f.module for f in FILE_FORMATS},
-         "read_npy": "numpy_", "read_npz": "numpy_", "from_sep005": "sep005", "to_sep005": "sep005"}
+         "read_npy": "numpy_", "read_npz": "numpy_", "from_sep005": "sep005", "to_sep005": "sep005",
+         "Campaign": "campaign", "load_campaign": "campaign"}
 
 
 def __getattr__(name):  # PEP 562: import format modules on first use
