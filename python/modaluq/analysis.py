@@ -35,7 +35,7 @@ from .jsonvalues import finite_or_none, jsonable
 from .preprocess import Preprocessed, preprocess
 from .provenance import provenance
 from .results import IdentificationWarning, ModalUQWarning, Result
-from .selection import DropReason, SelectedModes, select_modes
+from .selection import SelectedModes, largest_dropped_clusters, select_modes
 from .settings import ClusteringSettings, PoleStatus, Settings, StabilityCriteria
 from .stabilization import Diagram, stabilization_diagram
 
@@ -361,14 +361,7 @@ class Analysis:
                          "(try more orders, a longer record, a narrower band or looser criteria)")
         if self.horizons is not None:
             lines += ["", str(self.horizons)]
-        # the largest dropped clusters, with why: what a person checks against the diagram
-        dropped = sorted(zip(sel.dropped_n_poles, sel.dropped_frequency_hz, sel.dropped_reason, sel.dropped_code),
-                         key=lambda t: (-t[0], t[1]))
-        shown = [d for d in dropped if d[0] >= max(3, sel.min_cluster_size // 2)
-                 or d[3] is DropReason.FREQUENCY_STD_ABOVE_BANDWIDTH][:8]
-        if shown:
-            lines.append(f"dropped clusters ({len(dropped)} in all; the largest):")
-            lines += [f"  {f:.4g} Hz: {why}" for n, f, why, _ in sorted(shown, key=lambda t: t[1])]
+        lines += largest_dropped_clusters(sel)
         return "\n".join(lines)
 
     def __str__(self) -> str:

@@ -24,7 +24,7 @@ from .io import Campaign, load_campaign
 from .preprocess import preprocess
 from .provenance import provenance
 from .results import ModalUQWarning, Result
-from .selection import DropReason, SelectedModes, select_modes
+from .selection import SelectedModes, largest_dropped_clusters, select_modes
 from .settings import ClusteringSettings, PoleStatus, Settings, StabilityCriteria
 from .spectrum import output_spectrum_singular_values
 from .stabilization import Diagram, stabilization_diagram
@@ -196,13 +196,7 @@ class CampaignAnalysis:
             lines = ["no mode selected: no cluster of stable poles both reached "
                      f"{sel.min_cluster_size} poles and had a frequency std within its bandwidth "
                      "(try more orders, longer setups, a narrower band or looser criteria)"]
-        dropped = sorted(zip(sel.dropped_n_poles, sel.dropped_frequency_hz, sel.dropped_reason, sel.dropped_code),
-                         key=lambda t: (-t[0], t[1]))
-        shown = [t for t in dropped if t[0] >= max(3, sel.min_cluster_size // 2)
-                 or t[3] is DropReason.FREQUENCY_STD_ABOVE_BANDWIDTH][:8]
-        if shown:
-            lines.append(f"dropped clusters ({len(dropped)} in all; the largest):")
-            lines += [f"  {f:.4g} Hz: {why}" for n, f, why, _ in sorted(shown, key=lambda t: t[1])]
+        lines += largest_dropped_clusters(sel)
         return "\n".join(lines)
 
     def __str__(self) -> str:

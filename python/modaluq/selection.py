@@ -67,6 +67,20 @@ def dropped_reason_text(sel: "SelectedModes", k: int) -> str:
     raise ValueError(f"dropped_code[{k}] is not a DropReason: {code!r}")
 
 
+def largest_dropped_clusters(sel: "SelectedModes", most: int = 8) -> list[str]:
+    """Lines listing the largest dropped clusters of ``sel`` with why (what a person checks
+    against the diagram): clusters of at least max(3, min_cluster_size / 2) poles, and every
+    one dropped for its frequency std; empty when there is none."""
+    dropped = sorted(zip(sel.dropped_n_poles, sel.dropped_frequency_hz, sel.dropped_reason, sel.dropped_code),
+                     key=lambda t: (-t[0], t[1]))
+    shown = [d for d in dropped if d[0] >= max(3, sel.min_cluster_size // 2)
+             or d[3] is DropReason.FREQUENCY_STD_ABOVE_BANDWIDTH][:most]
+    if not shown:
+        return []
+    return [f"dropped clusters ({len(dropped)} in all; the largest):"] + \
+        [f"  {f:.4g} Hz: {why}" for _, f, why, _ in sorted(shown, key=lambda t: t[1])]
+
+
 @dataclass(frozen=True, repr=False)
 class SelectedModes:
     """Physical modes chosen automatically from a :class:`Diagram`, sorted by frequency.

@@ -159,10 +159,25 @@ def _check_outputs(args, has_geometry: bool = False, inputs=()):
     check_image_paths((("--plot", args.plot), ("--plot-shapes", args.plot_shapes)))
 
 
+def _progress(args, n_work_steps: int, path):
+    """The progress display of a run (``n_work_steps`` before the outputs) and its ``step(text)``:
+    shown on stderr only when it is a terminal (disable=None), cleared when done (leave=False)."""
+    from tqdm.auto import tqdm  # on first use: importing it costs the command's start-up time
+
+    n_steps = n_work_steps + bool(args.plot) + bool(args.plot_shapes) + len(args.out or []) + bool(args.report)
+    progress = tqdm(total=n_steps, desc=f"loading {Path(path).name}", unit="step", file=sys.stderr,
+                    leave=False, disable=True if args.no_progress else None,
+                    bar_format="{desc}: {n}/{total} steps [{elapsed}]")
+
+    def step(description: str) -> None:
+        progress.set_description_str(description)
+        progress.update()
+
+    return progress, step
+
+
 def run(args) -> int:
     """Execute ``modaluq identify`` for parsed ``args``; return the exit status."""
-    from tqdm.auto import tqdm
-
     t_start = time.perf_counter()
     if (args.file is None) == (args.setups is None):
         raise CliError("give a measurement FILE or --setups CAMPAIGN (a campaign file), not both or neither")
@@ -183,15 +198,7 @@ def run(args) -> int:
     read_options = parse_read_options(args.read_option)
     options = set(vars(args))
 
-    n_steps = 4 + bool(args.plot) + bool(args.plot_shapes) + len(args.out or []) + bool(args.report)
-    # shown on stderr only when it is a terminal (disable=None), cleared when done (leave=False)
-    progress = tqdm(total=n_steps, desc=f"loading {Path(args.file).name}", unit="step", file=sys.stderr,
-                    leave=False, disable=True if args.no_progress else None,
-                    bar_format="{desc}: {n}/{total} steps [{elapsed}]")
-
-    def step(description: str) -> None:
-        progress.set_description_str(description)
-        progress.update()
+    progress, step = _progress(args, 4, args.file)
 
     written = []
     with progress:
@@ -291,8 +298,6 @@ NOT_WITH_SETUPS = (("outputs", "--outputs", "a campaign's outputs are every chan
 def run_setups(args, t_start: float) -> int:
     """``modaluq identify --setups campaign.toml``: the campaign merged (identify_setups), then the
     same outputs as one record's."""
-    from tqdm.auto import tqdm
-
     from ..campaign_analysis import CampaignAnalysis
     from ..io import load_campaign
 
@@ -334,14 +339,7 @@ def run_setups(args, t_start: float) -> int:
         except ValueError as exc:
             raise CliError(f"geometry {geometry_path}: {exc}") from None
 
-    n_steps = 3 + bool(args.plot) + bool(args.plot_shapes) + len(args.out or []) + bool(args.report)
-    progress = tqdm(total=n_steps, desc=f"loading {Path(args.setups).name}", unit="step", file=sys.stderr,
-                    leave=False, disable=True if args.no_progress else None,
-                    bar_format="{desc}: {n}/{total} steps [{elapsed}]")
-
-    def step(description: str) -> None:
-        progress.set_description_str(description)
-        progress.update()
+    progress, step = _progress(args, 3, args.setups)
 
     with progress:
         try:
