@@ -94,7 +94,7 @@ def test_no_setup_and_not_toml(folder):
         load_campaign(write(folder, 'references = ["L3"]\n'))
     with pytest.raises(ValueError, match="not valid TOML"):
         load_campaign(write(folder, "references = [\n"))
-    with pytest.raises(FileNotFoundError, match="no such campaign file"):
+    with pytest.raises(FileNotFoundError, match="no such file"):
         load_campaign(folder / "none.toml")
 
 

@@ -27,10 +27,10 @@ from __future__ import annotations
 
 import math
 import numbers
-import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from ._common import check_path
 from .errors import RecordingFileError
 from .recording import Recording
 
@@ -158,13 +158,7 @@ def load_campaign(path) -> Campaign:
         import tomllib  # Python 3.11+
     except ImportError:  # pragma: no cover - 3.9/3.10
         import tomli as tomllib
-    if isinstance(path, bytes):
-        path = os.fsdecode(path)
-    if not isinstance(path, (str, os.PathLike)):
-        raise TypeError(f"path must be a str or os.PathLike, got {type(path).__name__}")
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"{path}: no such campaign file")
+    path = check_path(path)
     try:
         with open(path, "rb") as fh:
             doc = tomllib.load(fh)
