@@ -100,10 +100,12 @@ def _title(modes, k, disp, geometry, lag):
     f, xi = float(modes.frequency_hz[k]), float(modes.damping_ratio[k])
     sf = getattr(modes, "frequency_std", None)
     sx = getattr(modes, "damping_std", None)
+    labels = getattr(modes, "mode_labels", None)  # e.g. "order 20, mode 3" (Result.plot_shape with order=)
+    name = str(labels[k]) if labels is not None else f"mode {k + 1}"
     if sf is not None and np.isfinite(sf[k]):
-        head = f"mode {k + 1}: {f:.4g} ± {sf[k]:.2g} Hz, ξ {100 * xi:.3g} ± {100 * sx[k]:.2g} %"
+        head = f"{name}: {f:.4g} ± {sf[k]:.2g} Hz, ξ {100 * xi:.3g} ± {100 * sx[k]:.2g} %"
     else:
-        head = f"mode {k + 1}: {f:.4g} Hz, ξ {100 * xi:.3g} %"
+        head = f"{name}: {f:.4g} Hz, ξ {100 * xi:.3g} %"
     if disp.covariance is None:
         env = "no σ"
     elif disp.exact:
@@ -204,7 +206,8 @@ def plot_shape(modes, mode: int, geometry, *, ax=None, scale=None, sigma=ENVELOP
     ----------
     modes : SelectedModes
         Or anything with ``frequency_hz``, ``damping_ratio``, ``mode_shape`` and ``output_names``;
-        its ``mode_covariance`` (exact envelope) or ``mode_shape_std_real/imag``.
+        its ``mode_covariance`` (exact envelope) or ``mode_shape_std_real/imag``; optional
+        ``mode_labels`` (one title per mode, default "mode k").
     mode : int
         From 1, as in the tables.
     geometry : Geometry

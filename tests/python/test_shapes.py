@@ -126,3 +126,43 @@ def test_selected_modes_methods(chain, tmp_path):
     assert "shape covariance" in fig.axes[0].get_title()
     sel.animate(1, geometry=geo, path=tmp_path / "a.gif", frames=4)
     assert (tmp_path / "a.gif").stat().st_size > 0
+
+
+def test_result_methods_draw_the_selected_mode_or_a_pole_of_an_order(chain, tmp_path):
+    import modaluq
+    from modaluq.geometry import mode_displacements
+
+    result = modaluq.identify(chain.y, fs=chain.fs, block_rows=15, orders=range(2, 31, 2),
+                              output_names=["a", "b", "c"])
+    geo = Geometry.from_dict({"nodes": [[1, 0, 0, 0], [2, 1, 0, 0], [3, 2, 0, 0], [4, 3, 0, 0]],
+                              "lines": [[1, 2], [2, 3], [3, 4]],
+                              "channels": [{"name": n, "node": i + 2, "direction": "y"}
+                                           for i, n in enumerate("abc")]})
+    sel = result.select_modes()
+    # by default the selected modes, numbered as print(result) and the tables number them
+    fig = result.plot_shape(2, geo)
+    title = fig.axes[0].get_title()
+    assert title.startswith(f"mode 2: {sel.frequency_hz[1]:.4g} ± ") and "shape covariance" in title
+    cols = [c for c in fig.axes[0].collections if hasattr(c, "_segments3d")]
+    deformed = next(c for c in cols if matplotlib.colors.same_color(c.get_color()[0], "tab:blue"))
+    disp = mode_displacements(sel, 2, geo)  # the deformed lines are the selected mode's shape
+    factor = shapes._scale(geo, disp.value, None)
+    want = geo.coordinates + factor * disp.at_phase(shapes.peak_phase(disp.value))
+    np.testing.assert_allclose(np.asarray(deformed._segments3d)[:, 1], want[1:], atol=1e-12)
+    # order=: a pole of that order, numbered as print(result.at_order(n)), with its own covariance
+    m = result.at_order(12)
+    fig = result.plot_shape(3, geo, order=12)
+    title = fig.axes[0].get_title()
+    assert title.startswith(f"order 12, mode 3: {m.frequency_hz[2]:.4g} ± ") and "shape covariance" in title
+    src, k = result._shape_source(3, 12, None, None)
+    d = mode_displacements(src, k, geo)
+    np.testing.assert_allclose(d.value[1:, 1], m.mode_shape[:, 2])
+    np.testing.assert_allclose(d.covariance[1:, 1, 1], m.mode_shape_std_real[:, 2] ** 2, rtol=1e-12, atol=1e-300)
+    anim = result.animate(1, geo, path=tmp_path / "r.gif", frames=4, order=12)
+    assert (tmp_path / "r.gif").stat().st_size > 0 and anim is not None
+    with pytest.raises(ValueError, match="order 13 was not identified"):
+        result.plot_shape(1, geo, order=13)
+    with pytest.raises(ValueError, match="mode"):
+        result.plot_shape(m.n_modes + 1, geo, order=12)
+    with pytest.raises(ValueError, match="criteria and settings"):
+        result.plot_shape(1, geo, order=12, criteria=modaluq.StabilityCriteria())
