@@ -7,7 +7,7 @@ embedded once, no network at view time):
 - the stabilization diagram: every pole at (f, order), coloured by status, ±σ_f error bars,
   hover with f, ξ, their σ, the order, status, reason and flags (noise-coupled, close singular
   values); zoomable; the spectrum's singular values behind when the samples are given;
-- the MAC matrix of the selected modes;
+- the MAC matrix of the selected modes (hover: each MAC ± its σ);
 - each mode animated on the geometry in 3-D (rotatable; Plotly frames over one cycle, play and a
   phase slider) with the ±2σ ellipsoid axes of every node, or, without a geometry, the shape per
   channel with ±σ bars.
@@ -24,10 +24,10 @@ from pathlib import Path
 
 import numpy as np
 
-from . import _core
 from .atomic import write_atomically
 from .checks import require
 from .geometry import mode_displacements
+from .indicators import mac_matrix
 from .settings import PoleStatus
 from .version import __version__
 
@@ -111,12 +111,19 @@ def _diagram_figure(go, diagram, selected, spectrum):
 
 def _mac_figure(go, selected):
     phi = np.asarray(selected.mode_shape, complex)
-    mac = _core.modal_assurance_criterion(phi, phi)
+    mm = mac_matrix(phi, getattr(selected, "mode_covariance", None))
+    mac, std = mm.mac, mm.std
     labels = [f"{k + 1}: {selected.frequency_hz[k]:.4g} Hz" for k in range(selected.n_modes)]
+    with_std = bool(np.isfinite(std).all())
+    hover = [[f"{mac[i, j]:.4f}" + (f" ± {std[i, j]:.2g}" if with_std and i != j else "")
+              for j in range(len(labels))] for i in range(len(labels))]
     fig = go.Figure(go.Heatmap(z=mac, x=labels, y=labels, zmin=0, zmax=1, colorscale="Blues",
                                text=[[f"{v:.3f}" for v in row] for row in mac], texttemplate="%{text}",
-                               hovertemplate="MAC(%{y}, %{x}) = %{z:.4f}<extra></extra>"))
-    fig.update_layout(title="MAC of the selected modes", height=max(320, 60 + 40 * selected.n_modes),
+                               customdata=hover,
+                               hovertemplate="MAC(%{y}, %{x}) = %{customdata}<extra></extra>"))
+    note = ("<br><sub>hover: ±1σ, shapes taken as independent (their cross-covariance is not kept)</sub>"
+            if with_std else "")
+    fig.update_layout(title="MAC of the selected modes" + note, height=max(320, 60 + 40 * selected.n_modes),
                       width=max(420, 160 + 60 * selected.n_modes), yaxis={"autorange": "reversed"})
     return fig
 
