@@ -70,6 +70,46 @@ def test_geometry_and_modes_round_trip_through_pyuff(tmp_path, floor):
         np.testing.assert_allclose(got.imag, np.sqrt(var[:, 3:]), rtol=RTOL, atol=1e-14)
 
 
+def test_constrained_nodes_are_exported_in_xyz_with_sigma_through_the_same_map(tmp_path, floor):
+    # The floor's 4 corners from 3 sensors (rigid in its plane) and a mid-column node whose x is
+    # half the top's (a linear constraint): every node's x, y, z in UFF 55, and the σ file from
+    # T C T' with T written here by hand from the rigid-body kinematics (not Geometry's solver).
+    geo, modes = floor
+    spec = {"nodes": [*[[int(i), *xyz] for i, xyz in zip(geo.node_ids, geo.coordinates.tolist())], [5, 4, 0, 1.5]],
+            "lines": [*geo.lines.tolist(), [2, 5], [5, 12]],
+            "channels": [{"name": "ax", "node": 11, "direction": "x"}, {"name": "ay", "node": 11, "direction": "y"},
+                         {"name": "cx", "node": 13, "direction": "x"}],
+            "constraints": [{"kind": "rigid", "nodes": [11, 12, 13, 14], "channels": ["ax", "ay", "cx"],
+                             "normal": "z"},
+                            {"kind": "linear", "node": 5, "direction": "x", "weights": {"ax": 0.5}}]}
+    geo = Geometry.from_dict(spec)
+    # u = t + θ e_z × (p - c), c = (2, 1.5): ax = tx + 1.5θ, ay = ty - 2θ, cx = tx - 1.5θ
+    rigid = np.array([[0.5, 0, 0.5], [2 / 3, 1, -2 / 3], [1 / 3, 0, -1 / 3]])  # [tx, ty, θ] from [ax, ay, cx]
+    t = np.zeros((geo.n_nodes, 3, 3))  # node, xyz, channel
+    for n, (x, y, _) in zip(geo.node_ids, geo.coordinates):
+        i = int(np.flatnonzero(geo.node_ids == n)[0])
+        if n in (11, 12, 13, 14):
+            t[i, 0] = rigid[0] - (y - 1.5) * rigid[2]
+            t[i, 1] = rigid[1] + (x - 2.0) * rigid[2]
+        elif n == 5:
+            t[i, 0] = [0.5, 0, 0]
+    big = np.zeros((6 * geo.n_nodes, 6))  # [Re u; Im u] per node from [Re φ; Im φ]
+    for i in range(geo.n_nodes):
+        big[6 * i:6 * i + 3, :3] = big[6 * i + 3:6 * i + 6, 3:] = t[i]
+    paths = exchange.write_uff(tmp_path / "c.uff", modes, geo)
+    sets, std = (pyuff.UFF(str(p)).read_sets() for p in paths)
+    assert [s["type"] for s in sets] == [15, 82, 55, 55]
+    for k in range(2):
+        got = np.column_stack([sets[2 + k][r] for r in ("r1", "r2", "r3")])
+        np.testing.assert_array_equal(sets[2 + k]["node_nums"], geo.node_ids)
+        np.testing.assert_allclose(got, t @ modes.mode_shape[:, k], rtol=RTOL, atol=1e-12)
+        assert np.all(got[[0, 1, 2, 3]] == 0) and got[geo.node_ids.tolist().index(5), 1] == 0  # base; 5 along x only
+        var = np.diag(big @ modes.mode_shape_covariance[k] @ big.T).reshape(-1, 2, 3)
+        got = np.column_stack([std[2 + k][r] for r in ("r1", "r2", "r3")])
+        np.testing.assert_allclose(got.real, np.sqrt(var[:, 0]), rtol=RTOL, atol=1e-14)
+        np.testing.assert_allclose(got.imag, np.sqrt(var[:, 1]), rtol=RTOL, atol=1e-14)
+
+
 def test_modaluq_reads_its_own_file_back_with_the_geometry(tmp_path, floor):
     geo, modes = floor
     exchange.write_uff(tmp_path / "m.uff", modes, geo)
