@@ -1,4 +1,4 @@
-"""Figures of docs/shapes.md: modes of two shared records on their geometries (examples/geometry/),
+"""Figures of docs/shapes.md: modes of three shared records on their geometries (examples/geometry/),
 static and animated, and a screenshot of the HTML report in headless Chromium (when installed).
 
     python docs/make_shapes_figures.py [DATA_DIR]     # default /work/shared/data
@@ -31,6 +31,13 @@ def analysis(name):
 frame = analysis("koma_shearframe_sim.npz")
 geo = modaluq.Geometry.from_toml(ROOT / "examples/geometry/koma_shearframe.toml")
 frame.selected.plot_shape(2, geometry=geo, magnify_envelope=10).savefig(IMG / "shapes_frame_mode2.png", dpi=100)
+
+frame.selected.plot_mac().savefig(IMG / "shapes_frame_automac.png", dpi=100)
+
+deck = analysis("ssicov_lysefjord_bridge_sim.npz")
+dgeo = modaluq.Geometry.from_toml(ROOT / "examples/geometry/lysefjord_deck.toml")
+deck.selected.plot_shape(2, geometry=dgeo, magnify_envelope=10, elev=20, azim=-110).savefig(
+    IMG / "shapes_deck_mode2.png", dpi=100)
 
 tower = analysis("owi_offshore_wind_turbine_tower_2020.tdms")
 tgeo = modaluq.Geometry.from_toml(ROOT / "examples/geometry/owi_tower.toml")

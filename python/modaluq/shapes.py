@@ -96,6 +96,17 @@ def _envelope_segments(xyz, cov, moving, factor):
     return segs
 
 
+def _envelope_size(disp, alpha, sigma) -> str:
+    """The longest ±σ axis drawn against the largest node motion (true scale): an envelope too
+    small to see is then known to be small, not missing."""
+    peak = float(np.max(np.linalg.norm(np.abs(disp.value), axis=1), initial=0.0))
+    if peak == 0:
+        return ""
+    cov = disp.covariance_at(alpha)[disp.moving]
+    top = max((float(np.linalg.eigvalsh(0.5 * (c + c.T))[-1]) for c in cov), default=0.0)
+    return f"; true size up to {100 * sigma * math.sqrt(max(top, 0.0)) / peak:.2g} % of the largest motion"
+
+
 def _title(modes, k, disp, geometry, lag):
     f, xi = float(modes.frequency_hz[k]), float(modes.damping_ratio[k])
     sf = getattr(modes, "frequency_std", None)
@@ -251,7 +262,8 @@ def plot_shape(modes, mode: int, geometry, *, ax=None, scale=None, sigma=ENVELOP
     labels += ["undeformed", f"deformed (× {drawing.factor:.3g})"]
     if disp.covariance is not None and envelope:
         handles.append(Line2D([], [], color="tab:red", lw=1.4))
-        labels.append(f"±{sigma:g}σ ellipsoid axes" + (f" (σ × {magnify:g})" if magnify != 1 else ""))
+        labels.append(f"±{sigma:g}σ ellipsoid axes" + (f" (σ × {magnify:g})" if magnify != 1 else "")
+                      + _envelope_size(disp, peak_phase(disp.value), sigma))
     if ax.figure is fig and len(fig.axes) <= 2:  # a figure of its own: the legend below the axes
         fig.legend(handles, labels, fontsize=7, loc="outside lower center", ncols=3, frameon=False)
     else:

@@ -166,3 +166,14 @@ def test_result_methods_draw_the_selected_mode_or_a_pole_of_an_order(chain, tmp_
         result.plot_shape(m.n_modes + 1, geo, order=12)
     with pytest.raises(ValueError, match="criteria and settings"):
         result.plot_shape(1, geo, order=12, criteria=modaluq.StabilityCriteria())
+
+
+def test_legend_gives_the_true_size_of_the_envelope(beam):
+    geo, modes = beam
+    fig = shapes.plot_shape(modes, 1, geo, magnify_envelope=10)
+    disp = geo.displacements(modes.mode_shape[:, 0], modes.output_names, covariance=modes.mode_shape_covariance[0])
+    cov = disp.covariance_at(shapes.peak_phase(disp.value))
+    top = max(np.linalg.eigvalsh(c)[-1] for c in cov[disp.moving])
+    peak = np.max(np.linalg.norm(np.abs(disp.value), axis=1))
+    label = next(t.get_text() for t in fig.legends[0].get_texts() if "ellipsoid" in t.get_text())
+    assert label == f"±2σ ellipsoid axes (σ × 10); true size up to {100 * 2 * np.sqrt(top) / peak:.2g} % of the largest motion"
