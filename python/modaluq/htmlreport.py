@@ -39,6 +39,8 @@ STATUS_SYMBOL = {"stable": "circle", "stable_frequency": "triangle-down-open", "
                  "rejected": "circle"}
 #: phases per cycle of the 3-D animation
 ANIMATION_FRAMES = 16
+#: tick marks on the longest axis of a 3-D mode figure (the others in proportion to their length)
+MAX_TICKS_3D = 8
 #: largest node motion drawn, fraction of the structure's size
 DISPLAY_FRACTION = 0.15
 
@@ -210,9 +212,10 @@ def _shape_3d_figure(go, selected, k, geometry, sigma=2.0):
         title=f"{head}<br><sub>deformation × {factor:.3g}; ±{sigma:g}σ: {env}{rel}; drag to rotate</sub>",
         height=640, margin={"t": 70, "l": 0, "r": 0, "b": 0}, legend={"x": 0, "y": 0.9},
         scene={"camera": {"eye": {"x": 1.25, "y": -1.45, "z": 0.7}},
-               "xaxis": {"title": f"x [{geometry.units}]", "range": [lo[0], lo[0] + span[0]]},
-               "yaxis": {"title": f"y [{geometry.units}]", "range": [lo[1], lo[1] + span[1]]},
-               "zaxis": {"title": f"z [{geometry.units}]", "range": [lo[2], lo[2] + span[2]]},
+               # ticks in proportion to each axis's drawn length: a deck's short axes stay legible
+               **{f"{c}axis": {"title": f"{c} [{geometry.units}]", "range": [lo[i], lo[i] + span[i]],
+                               "nticks": max(3, int(round(MAX_TICKS_3D * ratio[i])))}
+                  for i, c in enumerate("xyz")},
                "aspectmode": "manual", "aspectratio": {"x": ratio[0], "y": ratio[1], "z": ratio[2]}},
         updatemenus=[{"type": "buttons", "x": 0.05, "y": 0.02, "xanchor": "left", "yanchor": "bottom",
                       "direction": "left", "buttons": [
