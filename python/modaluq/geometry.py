@@ -661,6 +661,8 @@ def mode_displacements(modes, mode: int, geometry):
     if cov is not None:
         return geometry.displacements(shape[:, k], names, covariance=np.asarray(cov)[k])
     sr, si = getattr(modes, "mode_shape_std_real", None), getattr(modes, "mode_shape_std_imag", None)
+    # a run without uncertainty has NaN std (SelectedModes): no σ, not a σ of NaN
+    sr, si = (None if v is None or not np.isfinite(np.asarray(v)[:, k]).any() else v for v in (sr, si))
     if sr is None and si is None:
         return geometry.displacements(shape[:, k], names)
     return geometry.displacements(shape[:, k], names, std_real=None if sr is None else np.asarray(sr)[:, k],

@@ -182,3 +182,16 @@ def test_refusals(tmp_path, floor):
     with pytest.raises(ValueError, match="'dx' is not a channel of the geometry"):
         exchange.write_uff(tmp_path / "m.uff", bad, geo)
     assert not (tmp_path / "m.uff").exists()
+
+
+def test_modes_without_uncertainty_write_no_std_file(tmp_path, floor, chain):
+    import modaluq
+
+    geo, _ = floor
+    result = modaluq.identify(chain.y, fs=chain.fs, block_rows=15, orders=range(2, 31, 2),
+                              output_names=["ax", "ay", "cx"], uncertainty=False)
+    sel = result.select_modes()
+    assert np.isnan(sel.mode_shape_std_real).all()  # NaN std: no σ to write
+    assert exchange.write_uff(tmp_path / "m.uff", sel, geo) == [tmp_path / "m.uff"]
+    assert not (tmp_path / "m.std.uff").exists()
+    assert len(pyuff.UFF(str(tmp_path / "m.uff")).read_sets()) == 2 + sel.n_modes

@@ -177,3 +177,17 @@ def test_legend_gives_the_true_size_of_the_envelope(beam):
     peak = np.max(np.linalg.norm(np.abs(disp.value), axis=1))
     label = next(t.get_text() for t in fig.legends[0].get_texts() if "ellipsoid" in t.get_text())
     assert label == f"±2σ ellipsoid axes (σ × 10); true size up to {100 * 2 * np.sqrt(top) / peak:.2g} % of the largest motion"
+
+
+def test_without_uncertainty_there_is_no_envelope_and_the_title_says_so(chain):
+    import modaluq
+
+    result = modaluq.identify(chain.y, fs=chain.fs, block_rows=15, orders=range(2, 31, 2),
+                              output_names=["a", "b", "c"], uncertainty=False)
+    geo = Geometry.from_dict({"nodes": [[1, 0, 0, 0], [2, 1, 0, 0], [3, 2, 0, 0], [4, 3, 0, 0]],
+                              "lines": [[1, 2], [2, 3], [3, 4]],
+                              "channels": [{"name": n, "node": i + 2, "direction": "y"}
+                                           for i, n in enumerate("abc")]})
+    for fig in (result.plot_shape(1, geo), result.plot_shape(1, geo, order=12)):
+        assert "no σ" in fig.axes[0].get_title()  # the selected modes' std are NaN: not a σ
+        assert not any("ellipsoid" in t.get_text() for t in fig.legends[0].get_texts())
