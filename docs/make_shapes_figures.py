@@ -54,10 +54,15 @@ if chromium:
                           title="modaluq identify owi_offshore_wind_turbine_tower_2020.tdms",
                           run_description=tower.describe_run(), warnings=tower.warnings)
         shot = Path(tmp) / "shot.png"
-        subprocess.run([chromium, "--headless", "--no-sandbox", "--disable-gpu", "--enable-unsafe-swiftshader",
-                        "--hide-scrollbars", f"--screenshot={shot}", "--window-size=1200,2300",
-                        "--virtual-time-budget=15000", report.as_uri()], capture_output=True, timeout=180)
+        import numpy as np
         from PIL import Image
 
-        Image.open(shot).convert("RGB").resize((900, 1725)).save(IMG / "shapes_report.png", optimize=True)
+        for _ in range(4):  # a loaded machine may take the screenshot before the first mode is drawn
+            subprocess.run([chromium, "--headless", "--no-sandbox", "--disable-gpu", "--enable-unsafe-swiftshader",
+                            "--hide-scrollbars", f"--screenshot={shot}", "--window-size=1200,2300",
+                            "--virtual-time-budget=30000", report.as_uri()], capture_output=True, timeout=180)
+            img = Image.open(shot).convert("RGB")
+            if np.asarray(img)[-300:].std() > 10:  # the 3-D mode at the bottom of the page
+                break
+        img.resize((900, 1725)).save(IMG / "shapes_report.png", optimize=True)
 print("wrote", *sorted(p.name for p in IMG.glob("shapes_*")))

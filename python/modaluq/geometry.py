@@ -147,6 +147,15 @@ class NodeDisplacements:
         m = np.hstack([math.cos(alpha) * np.eye(3), -math.sin(alpha) * np.eye(3)])  # 3 x 6
         return np.einsum("ij,njk,lk->nil", m, self.covariance, m)
 
+    def largest_std(self, alpha: float) -> float:
+        """The largest principal σ of any moving node's displacement at phase α (half the longest
+        ±1σ ellipsoid axis drawn), in the shape's units; NaN without a covariance, 0 if nothing moves."""
+        cov = self.covariance_at(alpha)
+        if cov is None:
+            return float("nan")
+        top = max((float(np.linalg.eigvalsh(0.5 * (c + c.T))[-1]) for c in cov[self.moving]), default=0.0)
+        return math.sqrt(max(top, 0.0))
+
     @property
     def real_covariance(self) -> np.ndarray | None:
         """(n_nodes, 3, 3) covariance of Re u (phase 0)."""

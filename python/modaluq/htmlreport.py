@@ -198,10 +198,9 @@ def _shape_3d_figure(go, selected, k, geometry, sigma=2.0):
     span = np.maximum(hi - lo, 0.05 * float((hi - lo).max()))
     ratio = span / span.max()
     # how large the envelope is against the motion (it may be too small to see at true scale)
-    var = np.diagonal(disp.covariance_at(0.0), axis1=1, axis2=2) if disp.covariance is not None else None
     rel = ""
-    if var is not None and peak > 0:
-        rel = f"; largest ±{sigma:g}σ: {100 * sigma * math.sqrt(float(var.max())) / peak:.2g} % of the largest motion"
+    if disp.covariance is not None and peak > 0:  # the longest axis drawn at phase 0, as the static figure's legend
+        rel = f"; largest ±{sigma:g}σ: {100 * sigma * disp.largest_std(0.0) / peak:.2g} % of the largest motion"
     f, xi = float(selected.frequency_hz[k]), float(selected.damping_ratio[k])
     sf = getattr(selected, "frequency_std", None)
     head = (f"mode {k + 1}: {f:.4g} ± {_fmt(float(sf[k]), 2)} Hz, ξ {100 * xi:.3g} ± "

@@ -100,11 +100,9 @@ def _envelope_size(disp, alpha, sigma) -> str:
     """The longest ±σ axis drawn against the largest node motion (true scale): an envelope too
     small to see is then known to be small, not missing."""
     peak = float(np.max(np.linalg.norm(np.abs(disp.value), axis=1), initial=0.0))
-    if peak == 0:
+    if peak == 0 or disp.covariance is None:
         return ""
-    cov = disp.covariance_at(alpha)[disp.moving]
-    top = max((float(np.linalg.eigvalsh(0.5 * (c + c.T))[-1]) for c in cov), default=0.0)
-    return f"; true size up to {100 * sigma * math.sqrt(max(top, 0.0)) / peak:.2g} % of the largest motion"
+    return f"; true size up to {100 * sigma * disp.largest_std(alpha) / peak:.2g} % of the largest motion"
 
 
 def _title(modes, k, disp, geometry, lag):
@@ -301,7 +299,9 @@ def animate_shape(modes, mode: int, geometry, *, path=None, frames: int = 24, fp
     ax.view_init(elev=elev, azim=azim)
     lag = float(np.nanmax(np.abs(drawing.phase), initial=0.0)) if np.any(disp.moving) else 0.0
     title = _title(modes, mode - 1, disp, geometry, lag)
-    ax.set_title(title + (f" (σ × {magnify:g})" if magnify != 1 else ""), fontsize=8)
+    size = _envelope_size(disp, peak_phase(disp.value), sigma) if disp.covariance is not None and envelope else ""
+    ax.set_title(title + (f" (σ × {magnify:g})" if magnify != 1 else "") + (f"\n±{sigma:g}σ{size[1:]}" if size else ""),
+                 fontsize=8)
     start = peak_phase(disp.value)
     phases = start + 2 * np.pi * np.arange(frames) / frames
     anim = FuncAnimation(fig, lambda i: drawing.draw(phases[i]), frames=frames, interval=1000.0 / fps, blit=False)

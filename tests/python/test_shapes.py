@@ -95,9 +95,12 @@ def test_animation_writes_a_gif_of_one_cycle(beam, tmp_path):
     pil = pytest.importorskip("PIL.Image")
     geo, modes = beam
     path = tmp_path / "m.gif"
-    shapes.animate_shape(modes, 1, geo, path=path, frames=8)
+    anim = shapes.animate_shape(modes, 1, geo, path=path, frames=8)
     with pil.open(path) as im:
         assert im.n_frames == 8
+    # the envelope's true size in the title, the number of the static figure's legend (tested below)
+    legend = next(t.get_text() for t in shapes.plot_shape(modes, 1, geo).legends[0].get_texts() if "ellipsoid" in t.get_text())
+    assert anim._fig.axes[0].get_title().endswith("\n±2σ " + legend.split("; ")[1])
     assert [p.name for p in tmp_path.iterdir()] == ["m.gif"]  # no temporary left
     with pytest.raises(ValueError, match="as .gif or .mp4"):
         shapes.animate_shape(modes, 1, geo, path=tmp_path / "m.avi")
@@ -191,3 +194,12 @@ def test_without_uncertainty_there_is_no_envelope_and_the_title_says_so(chain):
     for fig in (result.plot_shape(1, geo), result.plot_shape(1, geo, order=12)):
         assert "no σ" in fig.axes[0].get_title()  # the selected modes' std are NaN: not a σ
         assert not any("ellipsoid" in t.get_text() for t in fig.legends[0].get_texts())
+
+
+def test_largest_std_is_the_longest_principal_sigma_at_the_phase(beam):
+    geo, modes = beam  # σ(Re) = 0.02, 0.03, 0 and σ(Im) = 0.01, 0.01, 0 along z at nodes 2, 3, 4
+    disp = geo.displacements(modes.mode_shape[:, 0], modes.output_names, covariance=modes.mode_shape_covariance[0])
+    assert disp.largest_std(0.0) == pytest.approx(0.03, rel=1e-12)
+    assert disp.largest_std(math.pi / 2) == pytest.approx(0.01, rel=1e-12)
+    assert disp.largest_std(math.pi / 4) == pytest.approx(math.sqrt(0.5 * 0.03**2 + 0.5 * 0.01**2), rel=1e-12)
+    assert math.isnan(geo.displacements(modes.mode_shape[:, 0], modes.output_names).largest_std(0.0))
