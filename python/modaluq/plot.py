@@ -60,6 +60,8 @@ def _axes(ax, figsize):
 HORIZONTAL_SHAPES_ABOVE = 6
 #: The spectrum behind a diagram is drawn down to this fraction of its largest value in the band.
 SPECTRUM_DECADES_FLOOR = 1e-6
+#: an AutoMAC of more modes than this writes the values only in its cells (2 digits), no σ
+MAC_CELL_SIGMA_MAX_MODES = 8
 #: narrowest shaded ±σ band of a selected mode, as a fraction of the frequency axis
 MIN_BAND_FRACTION = 0.004
 
@@ -347,7 +349,7 @@ def plot_mac(modes, ax=None, *, figsize=None, title="AutoMAC"):
     mm = mac_matrix(shape, cov)
     im = ax.imshow(mm.mac, vmin=0.0, vmax=1.0, cmap="Blues", origin="upper")
     with_std = np.isfinite(mm.std).all()
-    small = m > 8
+    small = m > MAC_CELL_SIGMA_MAX_MODES
     for i in range(m):
         for j in range(m):
             v = mm.mac[i, j]
@@ -362,7 +364,11 @@ def plot_mac(modes, ax=None, *, figsize=None, title="AutoMAC"):
     ax.set_yticks(range(m), labels, fontsize=7)
     ax.tick_params(length=0)
     fig.colorbar(im, ax=ax, shrink=0.8, label="MAC")
-    note = ("±1σ, shapes taken as independent (cross-covariance not kept)" if with_std
-            else "no σ (no shape covariance)")
+    if not with_std:
+        note = "no σ (no shape covariance)"
+    elif small:
+        note = f"values only: more than {MAC_CELL_SIGMA_MAX_MODES} modes (σ: SelectedModes.mac_matrix())"
+    else:
+        note = "±1σ, shapes taken as independent (cross-covariance not kept)"
     ax.set_title(f"{title}\n{note}", fontsize=9)
     return fig

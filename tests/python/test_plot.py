@@ -274,6 +274,12 @@ def test_automac_draws_each_mac_with_its_sigma(small_chain):
     assert "shapes taken as independent" in ax.get_title()
     assert [t.get_text() for t in ax.get_xticklabels()][0] == f"1\n{sel.frequency_hz[0]:.3g} Hz"
     # without covariances: the MAC alone, said
+    # more modes than fit a σ in a cell: values only, said
+    many = np.arange(9) % sel.n_modes
+    wide = types.SimpleNamespace(mode_shape=sel.mode_shape[:, many], frequency_hz=sel.frequency_hz[many],
+                                 mode_covariance=sel.mode_covariance[many])
+    ax = plot_mac(wide).axes[0]
+    assert "values only" in ax.get_title() and not any("±" in t.get_text() for t in ax.texts)
     bare = types.SimpleNamespace(mode_shape=sel.mode_shape, frequency_hz=sel.frequency_hz)
     ax = plot_mac(bare).axes[0]
     assert "no σ" in ax.get_title() and not any("±" in t.get_text() for t in ax.texts)
