@@ -138,7 +138,8 @@ def write_geometry_uff(path, geometry: Geometry) -> Path:
 
 def write_uff(path, modes, geometry: Geometry, *, std_path="auto") -> list:
     """Geometry (15, 82) and one UFF 55 per mode to ``path``; the standard deviations (UFF 55) to
-    ``std_path`` (default :func:`std_path_of`; None: not written; nothing when ``modes`` has no σ).
+    ``std_path`` (default :func:`std_path_of`; None: not written; nothing when ``modes`` has no σ,
+    e.g. an identification with ``uncertainty=False``).
 
     ``modes``: a :class:`~modaluq.SelectedModes` (or anything :func:`modaluq.shapes.plot_shape`
     takes) whose ``output_names`` the geometry places. Returns the paths written."""
@@ -146,10 +147,11 @@ def write_uff(path, modes, geometry: Geometry, *, std_path="auto") -> list:
     if path.suffix.lower() not in (".uff", ".unv"):
         raise ValueError(f"path {os.fspath(path)!r}: a Universal File ends in .uff or .unv")
     written = [_write_sets(path, geometry_datasets(geometry) + mode_datasets(modes, geometry))]
-    has_std = getattr(modes, "mode_shape_covariance", None) is not None or \
-        getattr(modes, "mode_covariance", None) is not None or \
-        getattr(modes, "mode_shape_std_real", None) is not None
-    if std_path is not None and has_std and np.asarray(modes.mode_shape).shape[1]:
+    n_modes = np.asarray(modes.mode_shape).shape[1]
+    # σ known (a covariance, or finite per-channel std: a run without uncertainty has NaN std)
+    has_std = n_modes > 0 and all(mode_displacements(modes, k + 1, geometry).covariance is not None
+                                  for k in range(n_modes))
+    if std_path is not None and has_std:
         sp = std_path_of(path) if std_path == "auto" else Path(std_path)
         written.append(_write_sets(sp, geometry_datasets(geometry) + mode_datasets(modes, geometry, std=True)))
     return written

@@ -31,6 +31,7 @@ import numpy as np
 
 from .atomic import csv_safe, write_atomically
 from .checks import require
+from .geometry import node_shapes
 from .jsonvalues import dumps, finite_or_none, jsonable
 from .provenance import file_sha256, provenance
 from .settings import PoleStatus
@@ -84,14 +85,16 @@ def selected_modes_to_dict(selected) -> dict:
     }
 
 
-def diagram_to_xarray(diagram, selected=None, attrs: dict | None = None):
+def diagram_to_xarray(diagram, selected=None, attrs: dict | None = None, geometry=None):
     """A :class:`~modaluq.Diagram` (and optionally the selected modes) as an :class:`xarray.Dataset`.
 
     Dimensions ``pole`` and ``channel`` (and ``mode`` with ``selected``, whose variables are
     prefixed ``selected_``); mode shapes are split into ``*_real`` / ``*_imag`` variables so
     that the dataset writes to NetCDF-4.
     ``attrs`` (e.g. a provenance stamp) become global attributes; nested values are stored
-    as JSON strings.
+    as JSON strings. With ``geometry`` (and ``selected``), every node's displacement of each mode
+    and its σ (:func:`modaluq.geometry.node_shapes`) in ``selected_node_shape_*`` (mode, node, axis)
+    and the nodes' coordinates in ``node_coordinates`` (node, axis).
     """
     xr = require("xarray", "Diagram.to_xarray")
 
@@ -152,6 +155,19 @@ def diagram_to_xarray(diagram, selected=None, attrs: dict | None = None):
                              ("mode_shape_spread_imag", sel.mode_shape_spread_imag)):
             pole_vars[f"selected_{name}"] = (("channel", "mode"), values, {})
         coords["mode"] = np.arange(1, sel.n_modes + 1)  # numbered from 1, as in every table and plot
+        if geometry is not None:
+            ns = node_shapes(sel, geometry)
+            dims = ("mode", "node", "axis")
+            how = "exact" if ns.exact else "per-channel"
+            unit = {"long_name": f"displacement of the node, global axes ({how} sigma through the geometry's map)"}
+            for name, values in (("real", ns.value.real), ("imag", ns.value.imag), ("std_real", ns.std_real),
+                                 ("std_imag", ns.std_imag)):
+                pole_vars[f"selected_node_shape_{name}"] = (dims, values, unit)
+            pole_vars["node_coordinates"] = (("node", "axis"), geometry.coordinates, {"units": geometry.units})
+            pole_vars["node_moving"] = (("node",), ns.moving.astype(np.int8),
+                                        {"long_name": "1: the node's displacement comes from channels; 0: it is fixed"})
+            coords["node"] = geometry.node_ids
+            coords["axis"] = ["x", "y", "z"]
     ds = xr.Dataset({k: xr.Variable(d, v, a) for k, (d, v, a) in pole_vars.items()}, coords=coords)
     gattrs = {"fs_hz": diagram.fs, "criteria": dumps(diagram.criteria.to_dict()),
               "identification_settings": dumps(diagram.result_settings)}
@@ -165,8 +181,9 @@ def diagram_to_xarray(diagram, selected=None, attrs: dict | None = None):
     return ds
 
 
-def report(diagram, selected, *, stamp: dict | None = None, extra: dict | None = None) -> dict:
-    """The JSON report as a dict: stamp, diagram summary, selected modes (see :func:`write_json`)."""
+def report(diagram, selected, *, stamp: dict | None = None, extra: dict | None = None, geometry=None) -> dict:
+    """The JSON report as a dict: stamp, diagram summary, selected modes (see :func:`write_json`);
+    with ``geometry``, every node's displacement of each mode with its σ (``node_shapes``)."""
     out = {"stamp": stamp if stamp is not None else provenance()}
     if extra:
         out.update(jsonable(extra))
@@ -196,13 +213,25 @@ def report(diagram, selected, *, stamp: dict | None = None, extra: dict | None =
                     "mpd_deg": "mean phase deviation, degrees (0: real shape), first-order std",
                     "mode_shape": "normalised: largest-modulus component = 1"}
     out["modes"] = sel["modes"]
+    if geometry is not None:
+        ns = node_shapes(selected, geometry)
+        out["units"]["node_shapes"] = ("displacement of each node in the global axes x, y, z (the geometry's map of "
+                                       "the channels: measured nodes, constrained nodes through their constraint, "
+                                       "fixed nodes 0), with sigma(Re) and sigma(Im) through the same map")
+        out["node_shapes"] = {
+            "geometry": geometry.name, "units": geometry.units, "node_ids": ns.node_ids.tolist(),
+            "coordinates": geometry.coordinates.tolist(), "moving": ns.moving.tolist(), "exact_sigma": ns.exact,
+            "modes": [{"mode": k + 1, "real": ns.value[k].real.tolist(), "imag": ns.value[k].imag.tolist(),
+                       "std_real": ns.std_real[k].tolist(), "std_imag": ns.std_imag[k].tolist()}
+                      for k in range(ns.value.shape[0])]}
     return jsonable(out)
 
 
-def write_json(path, diagram, selected, *, stamp: dict | None = None, extra: dict | None = None) -> Path:
+def write_json(path, diagram, selected, *, stamp: dict | None = None, extra: dict | None = None,
+               geometry=None) -> Path:
     """Write :func:`report` to ``path`` as indented UTF-8 JSON; return the path."""
     path = Path(path)
-    text = dumps(report(diagram, selected, stamp=stamp, extra=extra), indent=2)
+    text = dumps(report(diagram, selected, stamp=stamp, extra=extra, geometry=geometry), indent=2)
     return write_atomically(path, lambda tmp: tmp.write_text(text + "\n", encoding="utf-8"))
 
 
@@ -212,22 +241,25 @@ def write_csv(path, selected) -> Path:
     return write_atomically(path, lambda tmp: table.to_csv(tmp, index=True))  # the index: the mode number, from 1
 
 
-def write_netcdf(path, diagram, selected=None, *, stamp: dict | None = None) -> Path:
-    """Write the full diagram (every pole, status, reason, σ) and the selected modes to NetCDF-4."""
+def write_netcdf(path, diagram, selected=None, *, stamp: dict | None = None, geometry=None) -> Path:
+    """Write the full diagram (every pole, status, reason, σ) and the selected modes to NetCDF-4
+    (with ``geometry``: their node shapes too, :func:`diagram_to_xarray`)."""
     require("netCDF4", "writing NetCDF")  # xarray's own message would name an "engine", not the package
-    ds = diagram.to_xarray(selected, attrs={"stamp": dumps(stamp or provenance())})
+    ds = diagram_to_xarray(diagram, selected, attrs={"stamp": dumps(stamp or provenance())}, geometry=geometry)
     return write_atomically(path, lambda tmp: ds.to_netcdf(tmp, engine="netcdf4"))
 
 
-def write(path, diagram, selected, *, stamp: dict | None = None, extra: dict | None = None) -> Path:
+def write(path, diagram, selected, *, stamp: dict | None = None, extra: dict | None = None, geometry=None) -> Path:
     """Write by extension: ``.json`` (:func:`write_json`), ``.csv`` (:func:`write_csv`), ``.nc``
-    (:func:`write_netcdf`). Raises ``ValueError`` naming ``path`` for another extension."""
+    (:func:`write_netcdf`). Raises ``ValueError`` naming ``path`` for another extension. With
+    ``geometry``, the JSON and NetCDF hold every node's displacement of each mode with its σ
+    (the CSV stays one row per mode, per channel)."""
     kind = EXTENSIONS.get(Path(path).suffix.lower())
     if kind is None:
         raise ValueError(f"path {os.fspath(path)!r}: unsupported extension; use one of "
                          f"{', '.join(EXTENSIONS)}")
     if kind == "json":
-        return write_json(path, diagram, selected, stamp=stamp, extra=extra)
+        return write_json(path, diagram, selected, stamp=stamp, extra=extra, geometry=geometry)
     if kind == "csv":
         return write_csv(path, selected)
-    return write_netcdf(path, diagram, selected, stamp=stamp)
+    return write_netcdf(path, diagram, selected, stamp=stamp, geometry=geometry)

@@ -50,7 +50,8 @@ import numpy as np
 
 from .checks import check_integer
 
-__all__ = ["Constraint", "Geometry", "NodeDisplacements", "direction_vector", "mode_displacements"]
+__all__ = ["Constraint", "Geometry", "NodeDisplacements", "NodeShapes", "direction_vector", "mode_displacements",
+           "node_shapes"]
 
 #: axis names accepted for a direction, as in UFF's +X ... -Z
 AXES = {"x": (1.0, 0.0, 0.0), "y": (0.0, 1.0, 0.0), "z": (0.0, 0.0, 1.0)}
@@ -146,6 +147,15 @@ class NodeDisplacements:
             return None
         m = np.hstack([math.cos(alpha) * np.eye(3), -math.sin(alpha) * np.eye(3)])  # 3 x 6
         return np.einsum("ij,njk,lk->nil", m, self.covariance, m)
+
+    def largest_std(self, alpha: float) -> float:
+        """The largest principal σ of any moving node's displacement at phase α (half the longest
+        ±1σ ellipsoid axis drawn), in the shape's units; NaN without a covariance, 0 if nothing moves."""
+        cov = self.covariance_at(alpha)
+        if cov is None:
+            return float("nan")
+        top = max((float(np.linalg.eigvalsh(0.5 * (c + c.T))[-1]) for c in cov[self.moving]), default=0.0)
+        return math.sqrt(max(top, 0.0))
 
     @property
     def real_covariance(self) -> np.ndarray | None:
@@ -661,7 +671,43 @@ def mode_displacements(modes, mode: int, geometry):
     if cov is not None:
         return geometry.displacements(shape[:, k], names, covariance=np.asarray(cov)[k])
     sr, si = getattr(modes, "mode_shape_std_real", None), getattr(modes, "mode_shape_std_imag", None)
+    # a run without uncertainty has NaN std (SelectedModes): no σ, not a σ of NaN
+    sr, si = (None if v is None or not np.isfinite(np.asarray(v)[:, k]).any() else v for v in (sr, si))
     if sr is None and si is None:
         return geometry.displacements(shape[:, k], names)
     return geometry.displacements(shape[:, k], names, std_real=None if sr is None else np.asarray(sr)[:, k],
                                   std_imag=None if si is None else np.asarray(si)[:, k])
+
+
+@dataclass(frozen=True, eq=False)
+class NodeShapes:
+    """Every mode of a modes object at every node of a geometry (:func:`node_shapes`): what the
+    exports write beside the per-channel shapes."""
+
+    node_ids: np.ndarray      #: (n_nodes,)
+    value: np.ndarray         #: (n_modes, n_nodes, 3) complex: x, y, z in the global axes
+    std_real: np.ndarray      #: (n_modes, n_nodes, 3) σ(Re u), NaN without σ
+    std_imag: np.ndarray      #: (n_modes, n_nodes, 3) σ(Im u)
+    moving: np.ndarray        #: (n_nodes,) bool: the node's displacement comes from channels
+    exact: bool               #: σ from the shapes' covariance (False: per-channel σ, or no σ)
+
+
+def node_shapes(modes, geometry) -> NodeShapes:
+    """:func:`mode_displacements` of every mode of ``modes``: measured nodes from their channels,
+    constrained nodes through their constraint, the σ through the same linear map."""
+    n_modes = np.asarray(modes.mode_shape).shape[1]
+    n = geometry.n_nodes
+    value = np.zeros((n_modes, n, 3), complex)
+    sr, si = np.full((n_modes, n, 3), np.nan), np.full((n_modes, n, 3), np.nan)
+    exact, moving = n_modes > 0, np.zeros(n, bool)
+    for k in range(n_modes):
+        d = mode_displacements(modes, k + 1, geometry)
+        value[k], moving = d.value, d.moving
+        if d.covariance is None:
+            exact = False
+            continue
+        var = np.clip(np.diagonal(d.covariance, axis1=1, axis2=2), 0.0, None)
+        sr[k], si[k] = np.sqrt(var[:, :3]), np.sqrt(var[:, 3:])
+        exact = exact and d.exact
+    return NodeShapes(node_ids=geometry.node_ids.copy(), value=value, std_real=sr, std_imag=si, moving=moving,
+                      exact=bool(exact))

@@ -7,7 +7,7 @@ embedded once, no network at view time):
 - the stabilization diagram: every pole at (f, order), coloured by status, ±σ_f error bars,
   hover with f, ξ, their σ, the order, status, reason and flags (noise-coupled, close singular
   values); zoomable; the spectrum's singular values behind when the samples are given;
-- the MAC matrix of the selected modes;
+- the MAC matrix of the selected modes (hover: each MAC ± its σ);
 - each mode animated on the geometry in 3-D (rotatable; Plotly frames over one cycle, play and a
   phase slider) with the ±2σ ellipsoid axes of every node, or, without a geometry, the shape per
   channel with ±σ bars.
@@ -24,10 +24,10 @@ from pathlib import Path
 
 import numpy as np
 
-from . import _core
 from .atomic import write_atomically
 from .checks import require
 from .geometry import mode_displacements
+from .indicators import mac_matrix
 from .settings import PoleStatus
 from .version import __version__
 
@@ -39,6 +39,8 @@ STATUS_SYMBOL = {"stable": "circle", "stable_frequency": "triangle-down-open", "
                  "rejected": "circle"}
 #: phases per cycle of the 3-D animation
 ANIMATION_FRAMES = 16
+#: tick marks on the longest axis of a 3-D mode figure (the others in proportion to their length)
+MAX_TICKS_3D = 8
 #: largest node motion drawn, fraction of the structure's size
 DISPLAY_FRACTION = 0.15
 
@@ -111,12 +113,19 @@ def _diagram_figure(go, diagram, selected, spectrum):
 
 def _mac_figure(go, selected):
     phi = np.asarray(selected.mode_shape, complex)
-    mac = _core.modal_assurance_criterion(phi, phi)
+    mm = mac_matrix(phi, getattr(selected, "mode_covariance", None))
+    mac, std = mm.mac, mm.std
     labels = [f"{k + 1}: {selected.frequency_hz[k]:.4g} Hz" for k in range(selected.n_modes)]
+    with_std = bool(np.isfinite(std).all())
+    hover = [[f"{mac[i, j]:.4f}" + (f" ± {std[i, j]:.2g}" if with_std and i != j else "")
+              for j in range(len(labels))] for i in range(len(labels))]
     fig = go.Figure(go.Heatmap(z=mac, x=labels, y=labels, zmin=0, zmax=1, colorscale="Blues",
                                text=[[f"{v:.3f}" for v in row] for row in mac], texttemplate="%{text}",
-                               hovertemplate="MAC(%{y}, %{x}) = %{z:.4f}<extra></extra>"))
-    fig.update_layout(title="MAC of the selected modes", height=max(320, 60 + 40 * selected.n_modes),
+                               customdata=hover,
+                               hovertemplate="MAC(%{y}, %{x}) = %{customdata}<extra></extra>"))
+    note = ("<br><sub>hover: ±1σ, shapes taken as independent (their cross-covariance is not kept)</sub>"
+            if with_std else "")
+    fig.update_layout(title="MAC of the selected modes" + note, height=max(320, 60 + 40 * selected.n_modes),
                       width=max(420, 160 + 60 * selected.n_modes), yaxis={"autorange": "reversed"})
     return fig
 
@@ -189,10 +198,9 @@ def _shape_3d_figure(go, selected, k, geometry, sigma=2.0):
     span = np.maximum(hi - lo, 0.05 * float((hi - lo).max()))
     ratio = span / span.max()
     # how large the envelope is against the motion (it may be too small to see at true scale)
-    var = np.diagonal(disp.covariance_at(0.0), axis1=1, axis2=2) if disp.covariance is not None else None
     rel = ""
-    if var is not None and peak > 0:
-        rel = f"; largest ±{sigma:g}σ: {100 * sigma * math.sqrt(float(var.max())) / peak:.2g} % of the largest motion"
+    if disp.covariance is not None and peak > 0:  # the longest axis drawn at phase 0, as the static figure's legend
+        rel = f"; largest ±{sigma:g}σ: {100 * sigma * disp.largest_std(0.0) / peak:.2g} % of the largest motion"
     f, xi = float(selected.frequency_hz[k]), float(selected.damping_ratio[k])
     sf = getattr(selected, "frequency_std", None)
     head = (f"mode {k + 1}: {f:.4g} ± {_fmt(float(sf[k]), 2)} Hz, ξ {100 * xi:.3g} ± "
@@ -203,9 +211,10 @@ def _shape_3d_figure(go, selected, k, geometry, sigma=2.0):
         title=f"{head}<br><sub>deformation × {factor:.3g}; ±{sigma:g}σ: {env}{rel}; drag to rotate</sub>",
         height=640, margin={"t": 70, "l": 0, "r": 0, "b": 0}, legend={"x": 0, "y": 0.9},
         scene={"camera": {"eye": {"x": 1.25, "y": -1.45, "z": 0.7}},
-               "xaxis": {"title": f"x [{geometry.units}]", "range": [lo[0], lo[0] + span[0]]},
-               "yaxis": {"title": f"y [{geometry.units}]", "range": [lo[1], lo[1] + span[1]]},
-               "zaxis": {"title": f"z [{geometry.units}]", "range": [lo[2], lo[2] + span[2]]},
+               # ticks in proportion to each axis's drawn length: a deck's short axes stay legible
+               **{f"{c}axis": {"title": f"{c} [{geometry.units}]", "range": [lo[i], lo[i] + span[i]],
+                               "nticks": max(3, int(round(MAX_TICKS_3D * ratio[i])))}
+                  for i, c in enumerate("xyz")},
                "aspectmode": "manual", "aspectratio": {"x": ratio[0], "y": ratio[1], "z": ratio[2]}},
         updatemenus=[{"type": "buttons", "x": 0.05, "y": 0.02, "xanchor": "left", "yanchor": "bottom",
                       "direction": "left", "buttons": [

@@ -22,8 +22,8 @@ import numpy as np
 
 from . import _core
 
-__all__ = ["IndicatorValue", "MacTest", "mac_test", "mean_phase_deviation", "modal_phase_collinearity",
-           "shape_covariance"]
+__all__ = ["IndicatorValue", "MacMatrix", "MacTest", "mac_matrix", "mac_test", "mean_phase_deviation",
+           "modal_phase_collinearity", "shape_covariance"]
 
 
 @dataclass(frozen=True)
@@ -137,3 +137,49 @@ def _loss_p_value(loss: float, mean: float, std: float) -> float:
 
     scale, dof = std * std / (2 * mean), 2 * mean * mean / (std * std)
     return float(chi2.sf(max(loss, 0.0) / scale, dof))
+
+
+@dataclass(frozen=True)
+class MacMatrix:
+    """The MAC between every pair of a set of shapes (an AutoMAC) and its σ (second order)."""
+
+    mac: np.ndarray  #: (m, m), symmetric, 1 on the diagonal
+    #: (m, m) σ of each MAC, the shapes' cross-covariances taken as 0 (see :func:`mac_matrix`); 0 on
+    #: the diagonal (a shape's MAC with itself is 1 exactly); NaN without covariances
+    std: np.ndarray
+    #: True: the σ treat the shapes as independent, which two modes of one identification are not
+    independent_approximation: bool
+
+
+def mac_matrix(shapes, covariances=None) -> MacMatrix:
+    """AutoMAC of the columns of ``shapes`` (l, m) with the σ of each entry (second order, as
+    :func:`mac_test`) from ``covariances`` ((m, 2l, 2l) of [Re shape; Im shape], or the modes'
+    (m, 2+2l, 2+2l) of [f, ξ, Re shape, Im shape], e.g. ``SelectedModes.mode_covariance``).
+
+    **Approximation**: the σ of the MAC of modes *i* and *j* needs the cross-covariance of their
+    shapes, which the core does not keep (it stores each pole's covariance, not the factor it
+    is made of). It is taken as 0, as for shapes of two independent records. Against the exact
+    cross term (the NumPy oracle's factors, docs/shapes.md §6) this is within about ±20 % for
+    the simulated chain; the diagonal and the MAC values themselves are exact."""
+    phi = np.asarray(shapes)
+    if phi.ndim != 2 or 0 in phi.shape:
+        raise ValueError(f"shapes must be (n_channels, n_modes) with at least one of each; got shape {phi.shape}")
+    phi = np.column_stack([_shape(f"shapes[:, {k}]", phi[:, k]) for k in range(phi.shape[1])])
+    l, m = phi.shape
+    mac = np.asarray(_core.modal_assurance_criterion(phi, phi), float)
+    mac = 0.5 * (mac + mac.T)
+    np.fill_diagonal(mac, 1.0)
+    std = np.full((m, m), np.nan)
+    if covariances is not None:
+        c = np.asarray(covariances, dtype=float)
+        if c.ndim != 3 or c.shape[0] != m or c.shape[1:] not in ((2 * l, 2 * l), (2 + 2 * l, 2 + 2 * l)):
+            raise ValueError(f"covariances must be ({m}, {2 * l}, {2 * l}) shape covariances or ({m}, {2 + 2 * l}, "
+                             f"{2 + 2 * l}) mode covariances of {m} shapes of {l} channels; got shape {c.shape}")
+        if c.shape[1] == 2 + 2 * l:
+            c = c[:, 2:, 2:]
+        c = np.stack([_cov(f"covariances[{k}]", c[k], l) for k in range(m)])
+        std[np.diag_indices(m)] = 0.0
+        for i in range(m):
+            for j in range(i + 1, m):
+                std[i, j] = std[j, i] = float(_core.modal_assurance_statistics(phi[:, i], c[i], phi[:, j], c[j]).std)
+    return MacMatrix(mac=mac, std=std, independent_approximation=True)

@@ -20,10 +20,11 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from .checks import check_boolean, check_integer
+from .indicators import mac_matrix
 from .settings import PoleStatus
 from .spectrum import output_spectrum_singular_values
 
-__all__ = ["DIAGRAM_FIGSIZE", "STATUS_STYLE", "plot_mode_shapes", "plot_stabilization_diagram"]
+__all__ = ["DIAGRAM_FIGSIZE", "STATUS_STYLE", "plot_mac", "plot_mode_shapes", "plot_stabilization_diagram"]
 
 #: Size in inches of a new stabilization diagram (the command line's figures too).
 DIAGRAM_FIGSIZE = (9.0, 6.0)
@@ -59,6 +60,8 @@ def _axes(ax, figsize):
 HORIZONTAL_SHAPES_ABOVE = 6
 #: The spectrum behind a diagram is drawn down to this fraction of its largest value in the band.
 SPECTRUM_DECADES_FLOOR = 1e-6
+#: an AutoMAC of more modes than this writes the values only in its cells (2 digits), no σ
+MAC_CELL_SIGMA_MAX_MODES = 8
 #: narrowest shaded ±σ band of a selected mode, as a fraction of the frequency axis
 MIN_BAND_FRACTION = 0.004
 
@@ -312,4 +315,60 @@ def plot_mode_shapes(modes, fig=None, *, channel_positions=None, ncols=3, figsiz
         axes.flat[0].set_ylim(-1.15, 1.15)
         axes.flat[0].legend(fontsize=7, loc="lower left")
         fig.supylabel("mode shape (±1σ)", fontsize=9)
+    return fig
+
+
+def plot_mac(modes, ax=None, *, figsize=None, title="AutoMAC"):
+    """The MAC matrix of a set of modes (AutoMAC), each cell with its value and ±1σ.
+
+    Parameters
+    ----------
+    modes : SelectedModes
+        Or anything with ``mode_shape`` (n_outputs × n_modes), ``frequency_hz`` and optionally
+        ``mode_covariance`` (n_modes, 2+2l, 2+2l) or ``mode_shape_covariance`` (n_modes, 2l, 2l).
+    ax : matplotlib.axes.Axes, optional
+    title : str
+
+    The σ are those of :func:`modaluq.indicators.mac_matrix`: the shapes' cross-covariance is not
+    kept by the core and is taken as 0 (said under the title). Returns the Figure.
+    """
+    shape = np.asarray(modes.mode_shape)
+    if shape.ndim != 2:
+        raise ValueError(f"modes.mode_shape must be 2-D (n_outputs, n_modes); got shape {shape.shape}")
+    m = shape.shape[1]
+    if figsize is None:
+        figsize = (1.0 + 0.75 * max(m, 3), 0.8 + 0.7 * max(m, 3))
+    fig, ax = _axes(ax, figsize)
+    if m == 0:
+        ax.text(0.5, 0.5, "no modes", ha="center", va="center", transform=ax.transAxes)
+        ax.set_axis_off()
+        return fig
+    cov = getattr(modes, "mode_shape_covariance", None)
+    if cov is None:
+        cov = getattr(modes, "mode_covariance", None)
+    mm = mac_matrix(shape, cov)
+    im = ax.imshow(mm.mac, vmin=0.0, vmax=1.0, cmap="Blues", origin="upper")
+    with_std = np.isfinite(mm.std).all()
+    small = m > MAC_CELL_SIGMA_MAX_MODES
+    for i in range(m):
+        for j in range(m):
+            v = mm.mac[i, j]
+            text = f"{v:.2f}" if small else f"{v:.3f}"
+            if with_std and i != j and not small:
+                text += f"\n±{mm.std[i, j]:.2g}"
+            ax.text(j, i, text, ha="center", va="center", fontsize=6 if small else 7,
+                    color="white" if v > 0.6 else "black")
+    f = np.asarray(modes.frequency_hz, float)
+    labels = [f"{k + 1}\n{f[k]:.3g} Hz" for k in range(m)]
+    ax.set_xticks(range(m), labels, fontsize=7)
+    ax.set_yticks(range(m), labels, fontsize=7)
+    ax.tick_params(length=0)
+    fig.colorbar(im, ax=ax, shrink=0.8, label="MAC")
+    if not with_std:
+        note = "no σ (no shape covariance)"
+    elif small:
+        note = f"values only: more than {MAC_CELL_SIGMA_MAX_MODES} modes (σ: SelectedModes.mac_matrix())"
+    else:
+        note = "±1σ, shapes taken as independent (cross-covariance not kept)"
+    ax.set_title(f"{title}\n{note}", fontsize=9)
     return fig

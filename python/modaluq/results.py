@@ -289,6 +289,40 @@ class Result:
             selected = select_modes(diagram)
         return diagram.plot(ax, y=y, selected=selected, **kwargs)
 
+    def _shape_source(self, mode: int, order, criteria, settings):
+        """What :meth:`plot_shape` and :meth:`animate` draw: the selected modes (``order=None``) or
+        the modes of one order, with the number of the mode in it."""
+        if order is None:
+            return self.select_modes(criteria, settings), mode
+        if criteria is not None or settings is not None:
+            raise ValueError("criteria and settings choose the selected modes: give them without order=")
+        m = self.at_order(order)
+        if not m.n_modes:
+            raise ValueError(f"order {order} has no modes" + (f" ({m.note})" if m.note else ""))
+        return _OrderShapes(m, self.output_names or tuple(f"y{k}" for k in range(self.n_outputs))), mode
+
+    def plot_shape(self, mode: int, geometry, *, order=None, criteria=None, settings=None, ax=None, **kwargs):
+        """Mode ``mode`` on ``geometry`` in 3-D with its ±2σ envelope (:func:`modaluq.shapes.plot_shape`).
+
+        ``mode`` counts from 1 as in the tables: by default the automatically **selected** modes,
+        as ``print(result)`` and :meth:`plot` number them (``criteria`` and ``settings`` as in
+        :meth:`select_modes`); with ``order=n`` the poles of that model order, as
+        ``print(result.at_order(n))`` numbers them (to look at a pole the selection left out).
+        Returns the Figure."""
+        from .shapes import plot_shape
+
+        modes, k = self._shape_source(mode, order, criteria, settings)
+        return plot_shape(modes, k, geometry, ax=ax, **kwargs)
+
+    def animate(self, mode: int, geometry, *, path=None, order=None, criteria=None, settings=None, **kwargs):
+        """Mode ``mode`` moving on ``geometry`` over one cycle, written to ``path`` (.gif, or .mp4
+        with ffmpeg) when given (:func:`modaluq.shapes.animate_shape`); ``mode``, ``order``,
+        ``criteria`` and ``settings`` as in :meth:`plot_shape`. Returns the animation."""
+        from .shapes import animate_shape
+
+        modes, k = self._shape_source(mode, order, criteria, settings)
+        return animate_shape(modes, k, geometry, path=path, **kwargs)
+
     def __str__(self) -> str:
         kind = "input/output" if self.n_inputs else "output-only"
         lines = [
@@ -328,6 +362,26 @@ class Result:
     def __repr__(self) -> str:
         return (f"Result(orders={list(self.orders)[:6]}{'...' if len(self.orders) > 6 else ''}, "
                 f"n_samples={self.n_samples}, n_outputs={self.n_outputs}, n_inputs={self.n_inputs})")
+
+
+@dataclass(frozen=True)
+class _OrderShapes:
+    """The modes of one order as :mod:`modaluq.shapes` takes them: with the channel names and
+    each pole's covariance, titled "order n, mode k" (numbered as ``print(result.at_order(n))``)."""
+
+    modes: Modes
+    output_names: tuple
+
+    def __getattr__(self, name):
+        return getattr(self.modes, name)
+
+    @property
+    def mode_covariance(self):
+        return self.modes.covariance
+
+    @property
+    def mode_labels(self) -> tuple:
+        return tuple(f"order {self.modes.order}, mode {k + 1}" for k in range(self.modes.n_modes))
 
 
 def result_from_core(ident, settings, n_outputs, n_inputs, extra_warnings=(), output_names=()) -> Result:

@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import _core
-from .indicators import mean_phase_deviation, modal_phase_collinearity, shape_covariance
+from .indicators import mac_matrix, mean_phase_deviation, modal_phase_collinearity, shape_covariance
 from .settings import ClusteringSettings
 
 __all__ = ["DropReason", "SelectedModes", "dropped_reason_text", "select_modes"]
@@ -280,6 +280,17 @@ class SelectedModes:
         from .shapes import animate_shape
 
         return animate_shape(self, mode, geometry, path=path, **kwargs)
+
+    def mac_matrix(self):
+        """The AutoMAC of these modes with the σ of each entry (:func:`modaluq.indicators.mac_matrix`:
+        the cross-covariance of two modes is not kept and taken as 0)."""
+        return mac_matrix(self.mode_shape, self.mode_covariance)
+
+    def plot_mac(self, ax=None, **kwargs):
+        """The AutoMAC with ±1σ per cell; see :func:`modaluq.plot.plot_mac`. Returns the Figure."""
+        from .plot import plot_mac
+
+        return plot_mac(self, ax, **kwargs)
 
     def plot(self, fig=None, *, channel_positions=None):
         """Mode shapes with ±σ error bars; see :func:`modaluq.plot.plot_mode_shapes`. Returns the Figure."""

@@ -96,14 +96,25 @@ def _envelope_segments(xyz, cov, moving, factor):
     return segs
 
 
+def _envelope_size(disp, alpha, sigma) -> str:
+    """The longest ±σ axis drawn against the largest node motion (true scale): an envelope too
+    small to see is then known to be small, not missing."""
+    peak = float(np.max(np.linalg.norm(np.abs(disp.value), axis=1), initial=0.0))
+    if peak == 0 or disp.covariance is None:
+        return ""
+    return f"; true size up to {100 * sigma * disp.largest_std(alpha) / peak:.2g} % of the largest motion"
+
+
 def _title(modes, k, disp, geometry, lag):
     f, xi = float(modes.frequency_hz[k]), float(modes.damping_ratio[k])
     sf = getattr(modes, "frequency_std", None)
     sx = getattr(modes, "damping_std", None)
+    labels = getattr(modes, "mode_labels", None)  # e.g. "order 20, mode 3" (Result.plot_shape with order=)
+    name = str(labels[k]) if labels is not None else f"mode {k + 1}"
     if sf is not None and np.isfinite(sf[k]):
-        head = f"mode {k + 1}: {f:.4g} ± {sf[k]:.2g} Hz, ξ {100 * xi:.3g} ± {100 * sx[k]:.2g} %"
+        head = f"{name}: {f:.4g} ± {sf[k]:.2g} Hz, ξ {100 * xi:.3g} ± {100 * sx[k]:.2g} %"
     else:
-        head = f"mode {k + 1}: {f:.4g} Hz, ξ {100 * xi:.3g} %"
+        head = f"{name}: {f:.4g} Hz, ξ {100 * xi:.3g} %"
     if disp.covariance is None:
         env = "no σ"
     elif disp.exact:
@@ -204,7 +215,8 @@ def plot_shape(modes, mode: int, geometry, *, ax=None, scale=None, sigma=ENVELOP
     ----------
     modes : SelectedModes
         Or anything with ``frequency_hz``, ``damping_ratio``, ``mode_shape`` and ``output_names``;
-        its ``mode_covariance`` (exact envelope) or ``mode_shape_std_real/imag``.
+        its ``mode_covariance`` (exact envelope) or ``mode_shape_std_real/imag``; optional
+        ``mode_labels`` (one title per mode, default "mode k").
     mode : int
         From 1, as in the tables.
     geometry : Geometry
@@ -248,7 +260,8 @@ def plot_shape(modes, mode: int, geometry, *, ax=None, scale=None, sigma=ENVELOP
     labels += ["undeformed", f"deformed (× {drawing.factor:.3g})"]
     if disp.covariance is not None and envelope:
         handles.append(Line2D([], [], color="tab:red", lw=1.4))
-        labels.append(f"±{sigma:g}σ ellipsoid axes" + (f" (σ × {magnify:g})" if magnify != 1 else ""))
+        labels.append(f"±{sigma:g}σ ellipsoid axes" + (f" (σ × {magnify:g})" if magnify != 1 else "")
+                      + _envelope_size(disp, peak_phase(disp.value), sigma))
     if ax.figure is fig and len(fig.axes) <= 2:  # a figure of its own: the legend below the axes
         fig.legend(handles, labels, fontsize=7, loc="outside lower center", ncols=3, frameon=False)
     else:
@@ -286,7 +299,9 @@ def animate_shape(modes, mode: int, geometry, *, path=None, frames: int = 24, fp
     ax.view_init(elev=elev, azim=azim)
     lag = float(np.nanmax(np.abs(drawing.phase), initial=0.0)) if np.any(disp.moving) else 0.0
     title = _title(modes, mode - 1, disp, geometry, lag)
-    ax.set_title(title + (f" (σ × {magnify:g})" if magnify != 1 else ""), fontsize=8)
+    size = _envelope_size(disp, peak_phase(disp.value), sigma) if disp.covariance is not None and envelope else ""
+    ax.set_title(title + (f" (σ × {magnify:g})" if magnify != 1 else "") + (f"\n±{sigma:g}σ{size[1:]}" if size else ""),
+                 fontsize=8)
     start = peak_phase(disp.value)
     phases = start + 2 * np.pi * np.arange(frames) / frames
     anim = FuncAnimation(fig, lambda i: drawing.draw(phases[i]), frames=frames, interval=1000.0 / fps, blit=False)

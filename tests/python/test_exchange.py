@@ -70,6 +70,90 @@ def test_geometry_and_modes_round_trip_through_pyuff(tmp_path, floor):
         np.testing.assert_allclose(got.imag, np.sqrt(var[:, 3:]), rtol=RTOL, atol=1e-14)
 
 
+def _floor_with_mid_column(geo):
+    """The floor plus a mid-column node whose x is half the top's (a linear constraint), and the
+    map from [ax, ay, cx] to every node's x, y, z written by hand from the rigid-body kinematics
+    (not Geometry's solver): (n_nodes, 3, 3), and the (6 n_nodes, 6) map of [Re φ; Im φ]."""
+    spec = {"nodes": [*[[int(i), *xyz] for i, xyz in zip(geo.node_ids, geo.coordinates.tolist())], [5, 4, 0, 1.5]],
+            "lines": [*geo.lines.tolist(), [2, 5], [5, 12]],
+            "channels": [{"name": "ax", "node": 11, "direction": "x"}, {"name": "ay", "node": 11, "direction": "y"},
+                         {"name": "cx", "node": 13, "direction": "x"}],
+            "constraints": [{"kind": "rigid", "nodes": [11, 12, 13, 14], "channels": ["ax", "ay", "cx"],
+                             "normal": "z"},
+                            {"kind": "linear", "node": 5, "direction": "x", "weights": {"ax": 0.5}}]}
+    geo = Geometry.from_dict(spec)
+    # u = t + θ e_z × (p - c), c = (2, 1.5): ax = tx + 1.5θ, ay = ty - 2θ, cx = tx - 1.5θ
+    rigid = np.array([[0.5, 0, 0.5], [2 / 3, 1, -2 / 3], [1 / 3, 0, -1 / 3]])  # [tx, ty, θ] from [ax, ay, cx]
+    t = np.zeros((geo.n_nodes, 3, 3))  # node, xyz, channel
+    for i, (n, (x, y, _)) in enumerate(zip(geo.node_ids, geo.coordinates)):
+        if n in (11, 12, 13, 14):
+            t[i, 0] = rigid[0] - (y - 1.5) * rigid[2]
+            t[i, 1] = rigid[1] + (x - 2.0) * rigid[2]
+        elif n == 5:
+            t[i, 0] = [0.5, 0, 0]
+    big = np.zeros((6 * geo.n_nodes, 6))  # [Re u; Im u] per node from [Re φ; Im φ]
+    for i in range(geo.n_nodes):
+        big[6 * i:6 * i + 3, :3] = big[6 * i + 3:6 * i + 6, 3:] = t[i]
+    return geo, t, big
+
+
+def test_constrained_nodes_are_exported_in_xyz_with_sigma_through_the_same_map(tmp_path, floor):
+    # The floor's 4 corners from 3 sensors (rigid in its plane) and a mid-column node: every
+    # node's x, y, z in UFF 55, and the σ file from T C T' with T written by hand.
+    geo, t, big = _floor_with_mid_column(floor[0])
+    modes = floor[1]
+    paths = exchange.write_uff(tmp_path / "c.uff", modes, geo)
+    sets, std = (pyuff.UFF(str(p)).read_sets() for p in paths)
+    assert [s["type"] for s in sets] == [15, 82, 55, 55]
+    for k in range(2):
+        got = np.column_stack([sets[2 + k][r] for r in ("r1", "r2", "r3")])
+        np.testing.assert_array_equal(sets[2 + k]["node_nums"], geo.node_ids)
+        np.testing.assert_allclose(got, t @ modes.mode_shape[:, k], rtol=RTOL, atol=1e-12)
+        assert np.all(got[[0, 1, 2, 3]] == 0) and got[geo.node_ids.tolist().index(5), 1] == 0  # base; 5 along x only
+        var = np.diag(big @ modes.mode_shape_covariance[k] @ big.T).reshape(-1, 2, 3)
+        got = np.column_stack([std[2 + k][r] for r in ("r1", "r2", "r3")])
+        np.testing.assert_allclose(got.real, np.sqrt(var[:, 0]), rtol=RTOL, atol=1e-14)
+        np.testing.assert_allclose(got.imag, np.sqrt(var[:, 1]), rtol=RTOL, atol=1e-14)
+
+
+def test_json_and_netcdf_hold_every_node_with_its_sigma(tmp_path, floor, chain):
+    import json
+
+    import modaluq
+    from modaluq import export
+
+    pytest.importorskip("netCDF4")
+    xr = pytest.importorskip("xarray")
+    geo, t, big = _floor_with_mid_column(floor[0])
+    result = modaluq.identify(chain.y, fs=chain.fs, block_rows=15, orders=range(2, 31, 2),
+                              output_names=["ax", "ay", "cx"])
+    diagram = result.stabilization_diagram()
+    sel = diagram.select_modes()
+    export.write(tmp_path / "m.json", diagram, sel, geometry=geo)
+    export.write(tmp_path / "m.nc", diagram, sel, geometry=geo)
+    nodes = json.loads((tmp_path / "m.json").read_text(encoding="utf-8"))["node_shapes"]
+    assert nodes["node_ids"] == geo.node_ids.tolist() and nodes["exact_sigma"] is True
+    with xr.open_dataset(tmp_path / "m.nc") as ds:
+        assert ds["selected_node_shape_real"].dims == ("mode", "node", "axis")
+        np.testing.assert_array_equal(ds["node"], geo.node_ids)
+        np.testing.assert_allclose(ds["node_coordinates"], geo.coordinates)
+        for k in range(sel.n_modes):
+            want = t @ sel.mode_shape[:, k]
+            sd = np.sqrt(np.clip(np.diag(big @ sel.mode_covariance[k][2:, 2:] @ big.T), 0, None)).reshape(-1, 2, 3)
+            m = nodes["modes"][k]
+            assert m["mode"] == k + 1
+            np.testing.assert_allclose(np.array(m["real"]) + 1j * np.array(m["imag"]), want, atol=1e-12)
+            np.testing.assert_allclose(m["std_real"], sd[:, 0], rtol=1e-9, atol=1e-15)
+            np.testing.assert_allclose(m["std_imag"], sd[:, 1], rtol=1e-9, atol=1e-15)
+            got = ds["selected_node_shape_real"][k] + 1j * ds["selected_node_shape_imag"][k]
+            np.testing.assert_allclose(got, want, atol=1e-12)
+            np.testing.assert_allclose(ds["selected_node_shape_std_real"][k], sd[:, 0], rtol=1e-9, atol=1e-15)
+            np.testing.assert_allclose(ds["selected_node_shape_std_imag"][k], sd[:, 1], rtol=1e-9, atol=1e-15)
+    # without a geometry the exports are as before
+    export.write(tmp_path / "n.json", diagram, sel)
+    assert "node_shapes" not in json.loads((tmp_path / "n.json").read_text(encoding="utf-8"))
+
+
 def test_modaluq_reads_its_own_file_back_with_the_geometry(tmp_path, floor):
     geo, modes = floor
     exchange.write_uff(tmp_path / "m.uff", modes, geo)
@@ -142,3 +226,16 @@ def test_refusals(tmp_path, floor):
     with pytest.raises(ValueError, match="'dx' is not a channel of the geometry"):
         exchange.write_uff(tmp_path / "m.uff", bad, geo)
     assert not (tmp_path / "m.uff").exists()
+
+
+def test_modes_without_uncertainty_write_no_std_file(tmp_path, floor, chain):
+    import modaluq
+
+    geo, _ = floor
+    result = modaluq.identify(chain.y, fs=chain.fs, block_rows=15, orders=range(2, 31, 2),
+                              output_names=["ax", "ay", "cx"], uncertainty=False)
+    sel = result.select_modes()
+    assert np.isnan(sel.mode_shape_std_real).all()  # NaN std: no σ to write
+    assert exchange.write_uff(tmp_path / "m.uff", sel, geo) == [tmp_path / "m.uff"]
+    assert not (tmp_path / "m.std.uff").exists()
+    assert len(pyuff.UFF(str(tmp_path / "m.uff")).read_sets()) == 2 + sel.n_modes

@@ -84,6 +84,9 @@ def test_report_is_self_contained_and_holds_what_it_says(big_report):
         assert f"<td>{a.selected.frequency_hz[k]:.5g}</td>" in text
         assert f"id='mode-{k + 1}-figure'" in text
     assert "MAC of the selected modes" in text and "±2σ ellipsoid axes" in text
+    assert '"nticks":8' in text  # the longest axis of a 3-D shape (the short ones fewer, at least 3)
+    mm = a.selected.mac_matrix()  # the MAC's hover: each entry ± its σ
+    assert f'"{mm.mac[0, 1]:.4f} \\u00b1 {mm.std[0, 1]:.2g}"' in text
 
 
 def test_a_30_channel_100_order_report_stays_under_10_mb(big_report):

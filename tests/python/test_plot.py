@@ -1,6 +1,8 @@
 """Plots: the stabilization diagram draws ±σ_f bars at every pole over the output spectrum; the
 mode-shape plot draws ±σ bars on the shape components. Checked on the drawn artists."""
 
+import types
+
 import numpy as np
 import pytest
 
@@ -12,7 +14,7 @@ matplotlib = pytest.importorskip("matplotlib")
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
-from modaluq.plot import STATUS_STYLE, plot_mode_shapes, plot_stabilization_diagram  # noqa: E402
+from modaluq.plot import STATUS_STYLE, plot_mac, plot_mode_shapes, plot_stabilization_diagram  # noqa: E402
 
 
 @pytest.fixture(scope="module")
@@ -256,3 +258,28 @@ def test_selected_modes_get_a_visible_sigma_band_and_pole_bars_have_caps():
         lo, hi = min(spans, key=lambda sp: abs(0.5 * (sp[0] + sp[1]) - f))
         assert abs(0.5 * (lo + hi) - f) < 1e-9
         assert hi - lo >= max(2 * s, MIN_BAND_FRACTION * 19.0) - 1e-12
+
+
+def test_automac_draws_each_mac_with_its_sigma(small_chain):
+    _, _, sel = small_chain
+    fig = sel.plot_mac()
+    ax = fig.axes[0]
+    mm = sel.mac_matrix()
+    m = sel.n_modes
+    np.testing.assert_allclose(ax.images[0].get_array(), mm.mac)
+    texts = {(round(t.get_position()[1]), round(t.get_position()[0])): t.get_text() for t in ax.texts}
+    assert len(texts) == m * m
+    assert texts[(0, 0)] == "1.000"
+    assert texts[(0, 1)] == f"{mm.mac[0, 1]:.3f}\n±{mm.std[0, 1]:.2g}" and texts[(1, 0)] == texts[(0, 1)]
+    assert "shapes taken as independent" in ax.get_title()
+    assert [t.get_text() for t in ax.get_xticklabels()][0] == f"1\n{sel.frequency_hz[0]:.3g} Hz"
+    # without covariances: the MAC alone, said
+    # more modes than fit a σ in a cell: values only, said
+    many = np.arange(9) % sel.n_modes
+    wide = types.SimpleNamespace(mode_shape=sel.mode_shape[:, many], frequency_hz=sel.frequency_hz[many],
+                                 mode_covariance=sel.mode_covariance[many])
+    ax = plot_mac(wide).axes[0]
+    assert "values only" in ax.get_title() and not any("±" in t.get_text() for t in ax.texts)
+    bare = types.SimpleNamespace(mode_shape=sel.mode_shape, frequency_hz=sel.frequency_hz)
+    ax = plot_mac(bare).axes[0]
+    assert "no σ" in ax.get_title() and not any("±" in t.get_text() for t in ax.texts)

@@ -95,9 +95,12 @@ def test_animation_writes_a_gif_of_one_cycle(beam, tmp_path):
     pil = pytest.importorskip("PIL.Image")
     geo, modes = beam
     path = tmp_path / "m.gif"
-    shapes.animate_shape(modes, 1, geo, path=path, frames=8)
+    anim = shapes.animate_shape(modes, 1, geo, path=path, frames=8)
     with pil.open(path) as im:
         assert im.n_frames == 8
+    # the envelope's true size in the title, the number of the static figure's legend (tested below)
+    legend = next(t.get_text() for t in shapes.plot_shape(modes, 1, geo).legends[0].get_texts() if "ellipsoid" in t.get_text())
+    assert anim._fig.axes[0].get_title().endswith("\n±2σ " + legend.split("; ")[1])
     assert [p.name for p in tmp_path.iterdir()] == ["m.gif"]  # no temporary left
     with pytest.raises(ValueError, match="as .gif or .mp4"):
         shapes.animate_shape(modes, 1, geo, path=tmp_path / "m.avi")
@@ -126,3 +129,77 @@ def test_selected_modes_methods(chain, tmp_path):
     assert "shape covariance" in fig.axes[0].get_title()
     sel.animate(1, geometry=geo, path=tmp_path / "a.gif", frames=4)
     assert (tmp_path / "a.gif").stat().st_size > 0
+
+
+def test_result_methods_draw_the_selected_mode_or_a_pole_of_an_order(chain, tmp_path):
+    import modaluq
+    from modaluq.geometry import mode_displacements
+
+    result = modaluq.identify(chain.y, fs=chain.fs, block_rows=15, orders=range(2, 31, 2),
+                              output_names=["a", "b", "c"])
+    geo = Geometry.from_dict({"nodes": [[1, 0, 0, 0], [2, 1, 0, 0], [3, 2, 0, 0], [4, 3, 0, 0]],
+                              "lines": [[1, 2], [2, 3], [3, 4]],
+                              "channels": [{"name": n, "node": i + 2, "direction": "y"}
+                                           for i, n in enumerate("abc")]})
+    sel = result.select_modes()
+    # by default the selected modes, numbered as print(result) and the tables number them
+    fig = result.plot_shape(2, geo)
+    title = fig.axes[0].get_title()
+    assert title.startswith(f"mode 2: {sel.frequency_hz[1]:.4g} ± ") and "shape covariance" in title
+    cols = [c for c in fig.axes[0].collections if hasattr(c, "_segments3d")]
+    deformed = next(c for c in cols if matplotlib.colors.same_color(c.get_color()[0], "tab:blue"))
+    disp = mode_displacements(sel, 2, geo)  # the deformed lines are the selected mode's shape
+    factor = shapes._scale(geo, disp.value, None)
+    want = geo.coordinates + factor * disp.at_phase(shapes.peak_phase(disp.value))
+    np.testing.assert_allclose(np.asarray(deformed._segments3d)[:, 1], want[1:], atol=1e-12)
+    # order=: a pole of that order, numbered as print(result.at_order(n)), with its own covariance
+    m = result.at_order(12)
+    fig = result.plot_shape(3, geo, order=12)
+    title = fig.axes[0].get_title()
+    assert title.startswith(f"order 12, mode 3: {m.frequency_hz[2]:.4g} ± ") and "shape covariance" in title
+    src, k = result._shape_source(3, 12, None, None)
+    d = mode_displacements(src, k, geo)
+    np.testing.assert_allclose(d.value[1:, 1], m.mode_shape[:, 2])
+    np.testing.assert_allclose(d.covariance[1:, 1, 1], m.mode_shape_std_real[:, 2] ** 2, rtol=1e-12, atol=1e-300)
+    anim = result.animate(1, geo, path=tmp_path / "r.gif", frames=4, order=12)
+    assert (tmp_path / "r.gif").stat().st_size > 0 and anim is not None
+    with pytest.raises(ValueError, match="order 13 was not identified"):
+        result.plot_shape(1, geo, order=13)
+    with pytest.raises(ValueError, match="mode"):
+        result.plot_shape(m.n_modes + 1, geo, order=12)
+    with pytest.raises(ValueError, match="criteria and settings"):
+        result.plot_shape(1, geo, order=12, criteria=modaluq.StabilityCriteria())
+
+
+def test_legend_gives_the_true_size_of_the_envelope(beam):
+    geo, modes = beam
+    fig = shapes.plot_shape(modes, 1, geo, magnify_envelope=10)
+    disp = geo.displacements(modes.mode_shape[:, 0], modes.output_names, covariance=modes.mode_shape_covariance[0])
+    cov = disp.covariance_at(shapes.peak_phase(disp.value))
+    top = max(np.linalg.eigvalsh(c)[-1] for c in cov[disp.moving])
+    peak = np.max(np.linalg.norm(np.abs(disp.value), axis=1))
+    label = next(t.get_text() for t in fig.legends[0].get_texts() if "ellipsoid" in t.get_text())
+    assert label == f"±2σ ellipsoid axes (σ × 10); true size up to {100 * 2 * np.sqrt(top) / peak:.2g} % of the largest motion"
+
+
+def test_without_uncertainty_there_is_no_envelope_and_the_title_says_so(chain):
+    import modaluq
+
+    result = modaluq.identify(chain.y, fs=chain.fs, block_rows=15, orders=range(2, 31, 2),
+                              output_names=["a", "b", "c"], uncertainty=False)
+    geo = Geometry.from_dict({"nodes": [[1, 0, 0, 0], [2, 1, 0, 0], [3, 2, 0, 0], [4, 3, 0, 0]],
+                              "lines": [[1, 2], [2, 3], [3, 4]],
+                              "channels": [{"name": n, "node": i + 2, "direction": "y"}
+                                           for i, n in enumerate("abc")]})
+    for fig in (result.plot_shape(1, geo), result.plot_shape(1, geo, order=12)):
+        assert "no σ" in fig.axes[0].get_title()  # the selected modes' std are NaN: not a σ
+        assert not any("ellipsoid" in t.get_text() for t in fig.legends[0].get_texts())
+
+
+def test_largest_std_is_the_longest_principal_sigma_at_the_phase(beam):
+    geo, modes = beam  # σ(Re) = 0.02, 0.03, 0 and σ(Im) = 0.01, 0.01, 0 along z at nodes 2, 3, 4
+    disp = geo.displacements(modes.mode_shape[:, 0], modes.output_names, covariance=modes.mode_shape_covariance[0])
+    assert disp.largest_std(0.0) == pytest.approx(0.03, rel=1e-12)
+    assert disp.largest_std(math.pi / 2) == pytest.approx(0.01, rel=1e-12)
+    assert disp.largest_std(math.pi / 4) == pytest.approx(math.sqrt(0.5 * 0.03**2 + 0.5 * 0.01**2), rel=1e-12)
+    assert math.isnan(geo.displacements(modes.mode_shape[:, 0], modes.output_names).largest_std(0.0))

@@ -43,7 +43,7 @@ def _script(monkeypatch, name, *args):
 def test_every_study_is_smoke_tested():
     scripts = {p.name for p in HIGH_ORDERS.glob("*.py")} | {p.name for p in STUDIES.glob("*.py")}
     tested = set(HIGH_ORDER_RUNS) | {"prop.py", "earthquake_records.py", "settings_records.py", "selected_sigma_mc.py",
-                                           "indicators_mc.py", "multisetup_mc.py"}
+                                           "indicators_mc.py", "multisetup_mc.py", "automac_mc.py"}
     assert scripts == tested
 
 
@@ -60,6 +60,12 @@ def test_indicators_mc(capsys):
     out = _module("indicators_mc").main(n_records=2, duration=60.0)
     assert len(out) == 4 and all(a.shape == (2, 6, 8) for a in out.values())
     assert "same-mode rejected at 5 %" in capsys.readouterr().out
+
+
+def test_automac_mc(capsys):
+    out = _module("automac_mc").main(n_records=2, n_samples=6000)
+    assert set(out) == {"output-only", "input/output"}
+    assert "| pair | MAC | σ_MC | approx. / σ_MC | exact / σ_MC |" in capsys.readouterr().out
 
 
 @pytest.mark.slow

@@ -260,7 +260,8 @@ def _write_outputs(args, analysis, geometry, step, *, background, spectrum, stam
 
                 written += [str(w) for w in write_uff(p, analysis.selected, geometry)]
                 continue
-            export.write(p, analysis.diagram, analysis.selected, stamp=stamp, extra=analysis.report())
+            export.write(p, analysis.diagram, analysis.selected, stamp=stamp, extra=analysis.report(),
+                         geometry=geometry)
         except ImportError as exc:
             raise CliError(f"--out {p}: {exc}") from None
         written.append(p)
@@ -399,7 +400,8 @@ def register(subparsers) -> argparse.ArgumentParser:
                         "their std in NAME.std.uff); repeat for several")
     g.add_argument("--geometry", metavar="TOML", default=None,
                    help="the test geometry (nodes, lines, each channel's node and direction; docs/shapes.md): "
-                        "the report animates the modes on it and --out modes.uff writes them as UFF 55")
+                        "the report animates the modes on it, --out modes.uff writes them as UFF 55, and .json/.nc "
+                        "add every node's displacement with its sigma")
     g.add_argument("--report", metavar="HTML", default=None,
                    help="write one self-contained interactive HTML report (stabilization diagram with sigma, "
                         "modes, MAC, the modes animated on --geometry in 3-D); needs plotly")

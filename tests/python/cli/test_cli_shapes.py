@@ -59,6 +59,16 @@ def test_identify_with_geometry_report_and_uff(record, tmp_path, capsys):
     # node 3 carries channel m2 along x: its UFF x component is the shape's m2 component
     np.testing.assert_allclose(back.mode_shape[back.output_names.index("3+X")], a.selected.mode_shape[1],
                                rtol=1e-5, atol=1e-6)
+    # the JSON holds every node of the geometry too: node 3's x is channel m2, node 1 is fixed
+    import json
+
+    nodes = json.loads((tmp_path / "modes.json").read_text(encoding="utf-8"))["node_shapes"]
+    assert nodes["node_ids"] == [1, 2, 3, 4] and nodes["moving"] == [False, True, True, True]
+    shape = np.array([np.array(m["real"]) + 1j * np.array(m["imag"]) for m in nodes["modes"]])  # mode, node, xyz
+    np.testing.assert_allclose(shape[:, 2, 0], a.selected.mode_shape[1], rtol=1e-9, atol=1e-12)
+    np.testing.assert_array_equal(shape[:, 0], 0)
+    np.testing.assert_allclose(np.array([m["std_real"] for m in nodes["modes"]])[:, 2, 0],
+                               a.selected.mode_shape_std_real[1], rtol=1e-9, atol=1e-15)
 
 
 
