@@ -25,11 +25,18 @@ from typing import Callable, Optional, Sequence
 import numpy as np
 
 from . import horizons
-from .auto_settings import choose_settings
+from .auto_settings import (
+    LAG_PERIODS,
+    SIGMA_LOW_WARN,
+    block_seconds_for_sigma,
+    block_sigma_ratio,
+    choose_settings,
+    fewest_blocks,
+)
 from .checks import as_samples, check_boolean, check_instance, check_sampling_frequency
 from .harmonics import harmonic_kurtosis, possible_harmonics
 from .horizons import HorizonCheck
-from .identification import identify_quietly
+from .identification import identify_quietly, short_lag_warning
 from .io import Recording, load
 from .jsonvalues import finite_or_none, jsonable
 from .preprocess import Preprocessed, preprocess
@@ -80,31 +87,72 @@ def describe_orders(orders) -> str:
     return ", ".join(map(str, orders))
 
 
-def _warnings_of_selection(result: Result, selected: SelectedModes) -> list:
-    """The identification's warnings, with the one on slowly decaying poles (``Result.slow_decay``)
-    said of the selected modes, by the core's flag of each representative pole (blocks shorter
-    than half the decay time 1/(2π f ξ)): the core counts every pole of every order, mostly
-    spurious ones with ξ near 0, and it matters for a mode reported."""
+def _warnings_of_selection(result: Result, selected: SelectedModes, lag: str | None = None) -> list:
+    """The identification's warnings said of the selected modes (docs/settings.md, "Warnings that
+    mean something"): each is kept only when what it says changes a selected mode or its σ, and
+    its advice is one the rules allow.
+
+    - Slowly decaying poles (``Result.slow_decay``, the core's flag of every pole of every order,
+      mostly spurious ones with ξ near 0): said of the selected modes whose σ the blocks may
+      under-estimate by SIGMA_LOW_WARN or more (:func:`~modaluq.auto_settings.block_sigma_ratio`),
+      with the n_blocks that would do (never fewer than the rules' fewest) or the record length.
+    - ``lag``, the sentence of :func:`~modaluq.identification.short_lag_warning` that identify()
+      added (Python's own words; lags shorter than one period of the band's lower edge): kept when
+      a selected mode or a dropped cluster lies near that edge (below LAG_PERIODS f_low) with a
+      period longer than the lags, or when no mode is selected.
+    """
     out = list(result.warnings)
-    if result.slow_decay is None or not selected.n_modes or not result.n_blocks:
-        return out
-    k = result.warning_codes.index(IdentificationWarning.SLOW_DECAY)
-    slow = np.asarray(selected.block_too_short, bool)
+    drop = set()
+    if result.slow_decay is not None:
+        k = result.warning_codes.index(IdentificationWarning.SLOW_DECAY)
+        said = _slow_decay_of_selection(result, selected) if selected.n_modes and result.n_blocks else None
+        if said is None:
+            drop.add(k)
+        else:
+            out[k] = said
+    python_words = [k for k, c in enumerate(result.warning_codes) if c is None and out[k] == lag]
+    if lag is not None and python_words and not _lags_matter(result, selected):
+        drop.update(python_words)
+    return [w for k, w in enumerate(out) if k not in drop]
+
+
+def _slow_decay_of_selection(result: Result, selected: SelectedModes) -> str | None:
+    """The slow-decay warning of the selected modes whose σ may be SIGMA_LOW_WARN low, or None."""
+    block_s, record_s = result.slow_decay.block_seconds, result.slow_decay.record_seconds
+    f, xi = np.asarray(selected.frequency_hz, float), np.asarray(selected.damping_ratio, float)
+    flagged = np.asarray(selected.block_too_short, bool) & (xi > 0)
+    ratio = block_sigma_ratio(block_s, f, np.where(flagged, xi, 0.0))
+    slow = flagged & (ratio < 1.0 - SIGMA_LOW_WARN)
     if not slow.any():
-        del out[k]
-        return out
-    block_s = result.slow_decay.block_seconds
-    f, xi = selected.frequency_hz[slow], selected.damping_ratio[slow]
-    longest = float((1.0 / (2 * np.pi * f * xi)).max())  # the decay time the blocks should cover
-    # the core's rule (identify.hpp, SlowDecay) applied to the selected modes' longest decay
-    fitting = int(result.slow_decay.record_seconds / (0.5 * longest))  # blocks of half that time
-    advice = (f"use n_blocks <= {fitting}" if fitting >= 2
-              else "the record is too short for their decay (a longer record is needed)")
-    out[k] = (f"{int(slow.sum())} of the {selected.n_modes} selected modes ({', '.join(f'{x:.4g}' for x in f)} "
-              f"Hz) decay more slowly than the blocks are long (blocks of {block_s:.3g} s, less than half of the "
-              f"decay time 1/(2 pi f xi), up to {longest:.3g} s): their standard deviations are less reliable; "
-              f"{advice}")
-    return out
+        return None
+    need_s = max(block_seconds_for_sigma(float(a), float(b)) for a, b in zip(f[slow], xi[slow]))
+    fewest = fewest_blocks(result.n_outputs)
+    fitting = int(record_s // need_s)  # blocks as long as the slowest of them needs
+    if fitting >= fewest:
+        advice = f"use n_blocks <= {fitting} (blocks of at least {need_s:.3g} s)"
+    else:
+        advice = (f"fewer blocks cannot help: the rules need at least {fewest} blocks, and {fewest} blocks of "
+                  f"{need_s:.3g} s need a record of at least {fewest * need_s:.3g} s (this one has "
+                  f"{record_s:.3g} s)")
+    low = ", ".join(f"{x:.4g} Hz up to {100 * (1 - r):.0f} % low" for x, r in zip(f[slow], ratio[slow]))
+    return (f"{int(slow.sum())} of the {selected.n_modes} selected modes decay slowly for blocks of {block_s:.3g} s "
+            f"(decay time 1/(2 pi f xi) up to {float((1.0 / (2 * np.pi * f[slow] * xi[slow])).max()):.3g} s): "
+            f"their standard deviations may be under-estimated ({low}); {advice}")
+
+
+def _lags_matter(result: Result, selected: SelectedModes) -> bool:
+    """Whether lags shorter than one period of the band's lower edge concern this selection: a
+    selected mode or a dropped cluster near that edge (below LAG_PERIODS f_low) whose period is
+    longer than the lags, or no mode selected at all."""
+    if not selected.n_modes:
+        return True
+    band = result.settings.get("frequency_range")
+    if not band:
+        return True
+    spanned = result.fs / result.settings["block_rows"]  # the lowest frequency whose period the lags span
+    near = min(spanned, LAG_PERIODS * band[0])
+    found = np.concatenate([np.asarray(selected.frequency_hz, float), np.asarray(selected.dropped_frequency_hz, float)])
+    return bool(np.any((found >= band[0]) & (found < near)))
 
 
 @dataclass
@@ -244,8 +292,10 @@ class Analysis:
         the name of each step before it starts. The identification's warnings are kept in
         :attr:`warnings` and, with ``issue_warnings`` (default), issued as :class:`ModalUQWarning`;
         threads running analyses at once pass False (Python's warning filters are global state).
-        The warning of poles decaying more slowly than the blocks are long is said of the selected
-        modes (most such poles are spurious, with ξ near 0), and dropped when none of them is slow.
+        A warning is kept only when what it says concerns the selected modes (docs/settings.md,
+        "Warnings that mean something"): poles decaying more slowly than the blocks are long, when
+        a selected mode's σ may be under-estimated by 15 % or more; lags shorter than a period of
+        the band's lower edge, when a mode or a dropped cluster lies near that edge or none is found.
         """
         issue_warnings = check_boolean("issue_warnings", issue_warnings)
         step = progress or (lambda _: None)
@@ -261,7 +311,9 @@ class Analysis:
         self.diagram = stabilization_diagram(result, self.criteria, output_names=self.output_names)
         step("clustering")
         self.selected = select_modes(self.diagram, self.clustering)
-        self.warnings = tuple(_warnings_of_selection(result, self.selected))
+        lag = short_lag_warning(result.settings["block_rows"], pre.fs, pre.y.shape[1], pre.frequency_range,
+                                automatic=s.block_rows is None)
+        self.warnings = tuple(_warnings_of_selection(result, self.selected, lag))
         if issue_warnings:
             for w in self.warnings:
                 warnings.warn(w, ModalUQWarning, stacklevel=2)

@@ -31,7 +31,7 @@ from .preprocess import preprocess
 from .results import Result, result_from_core, warn_all
 from .settings import Settings
 
-__all__ = ["identify", "identify_quietly", "identify_setups", "make_settings"]
+__all__ = ["identify", "identify_quietly", "identify_setups", "make_settings", "short_lag_warning"]
 
 
 def make_settings(settings: Settings | None, keywords: dict, *, function: str = "identify") -> Settings:
@@ -142,6 +142,15 @@ def identify(y, u=None, *, fs: float, settings: Settings | None = None,
     return result
 
 
+def short_lag_warning(block_rows: int, fs: float, n_outputs: int, frequency_range, *, automatic: bool) -> str | None:
+    """The sentence of lags shorter than one period of the band's lowest frequency: for an
+    automatic ``block_rows`` capped by the size of H or the record (what to change), or for one
+    the user gave (the number to use); None when the lags span that period."""
+    if automatic:
+        return capped_lag_warning(block_rows, fs, n_outputs, frequency_range)
+    return lag_warning(block_rows, fs, frequency_range)
+
+
 def identify_quietly(y, u=None, *, fs: float, settings: Settings | None = None,
                      output_names: Sequence[str] | None = None, **keywords) -> Result:
     """:func:`identify` without issuing ``Result.warnings`` as Python warnings (they are kept in
@@ -187,14 +196,10 @@ def identify_quietly(y, u=None, *, fs: float, settings: Settings | None = None,
     if chosen is not None:
         record["chosen"] = list(chosen.reasons)
     extra = list(dead)
-    if chosen is None or not any(r.startswith("block_rows") for r in chosen.reasons):
-        lag = lag_warning(s.block_rows, fs, band)
-        if lag:
-            extra.append(lag)
-    else:
-        capped = capped_lag_warning(chosen, fs, y.shape[1], band)
-        if capped:
-            extra.append(capped)
+    lag = short_lag_warning(s.block_rows, fs, y.shape[1], band,
+                            automatic=chosen is not None and any(r.startswith("block_rows") for r in chosen.reasons))
+    if lag:
+        extra.append(lag)
     return result_from_core(ident, record, y.shape[1], 0 if u is None else u.shape[1], extra_warnings=extra,
                             output_names=names)
 
