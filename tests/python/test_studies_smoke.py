@@ -43,8 +43,24 @@ def _script(monkeypatch, name, *args):
 def test_every_study_is_smoke_tested():
     scripts = {p.name for p in HIGH_ORDERS.glob("*.py")} | {p.name for p in STUDIES.glob("*.py")}
     tested = set(HIGH_ORDER_RUNS) | {"prop.py", "earthquake_records.py", "settings_records.py", "selected_sigma_mc.py",
-                                           "indicators_mc.py", "multisetup_mc.py", "automac_mc.py"}
+                                           "indicators_mc.py", "multisetup_mc.py", "automac_mc.py",
+                                           "warnings_issue27.py", "warnings_issue27_premise.py"}
     assert scripts == tested
+
+
+@pytest.mark.slow
+def test_warnings_issue27(capsys, tmp_path):
+    out = _module("warnings_issue27").main(tmp_path, n_seeds=1)  # no records in tmp_path: simulations only
+    assert out["records"] == {} and set(out["simulations"]) == set(_module("warnings_issue27").SIMULATIONS)
+    beam = out["simulations"]["beam-like OO, band 0.5-20 Hz"][0]
+    assert beam["block_rows"] == 37 and "short_lags" not in beam["kinds"]
+    assert "| simulation | runs | fired (runs) |" in capsys.readouterr().out
+
+
+@pytest.mark.slow
+def test_warnings_issue27_premise(capsys):
+    _module("warnings_issue27_premise").main(200, seeds=range(2))
+    assert "200 blocks: mode 1 found in 2 of 2 runs" in capsys.readouterr().out
 
 
 @pytest.mark.slow
