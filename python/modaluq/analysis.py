@@ -25,14 +25,7 @@ from typing import Callable, Optional, Sequence
 import numpy as np
 
 from . import horizons
-from .auto_settings import (
-    LAG_PERIODS,
-    SIGMA_LOW_WARN,
-    block_seconds_for_sigma,
-    block_sigma_ratio,
-    choose_settings,
-    fewest_blocks,
-)
+from .auto_settings import LAG_PERIODS, choose_settings
 from .checks import as_samples, check_boolean, check_instance, check_sampling_frequency
 from .harmonics import harmonic_kurtosis, possible_harmonics
 from .horizons import HorizonCheck
@@ -87,63 +80,38 @@ def describe_orders(orders) -> str:
     return ", ".join(map(str, orders))
 
 
-def _warnings_of_selection(result: Result, selected: SelectedModes, lag: str | None = None) -> list:
-    """The identification's warnings said of the selected modes (docs/settings.md, "Warnings that
-    mean something"): each is kept only when what it says changes a selected mode or its σ, and
-    its advice is one the rules allow.
+def _warnings_of_selection(result: Result, selected: SelectedModes, lag: str | None = None,
+                           pole_frequency_hz=None) -> list:
+    """The identification's warnings that concern the selected modes (docs/settings.md, "Warnings
+    that mean something"): a warning is kept only when what it says changes a selected mode or
+    its σ.
 
-    - Slowly decaying poles (``Result.slow_decay``, the core's flag of every pole of every order,
-      mostly spurious ones with ξ near 0): said of the selected modes whose σ the blocks may
-      under-estimate by SIGMA_LOW_WARN or more (:func:`~modaluq.auto_settings.block_sigma_ratio`),
-      with the n_blocks that would do (never fewer than the rules' fewest) or the record length.
+    - Slowly decaying poles (``Result.slow_decay``, the core's flag of poles whose decay time
+      1/(2π f ξ) is more than twice a block): not said. Monte Carlo finds the σ of f and ξ of
+      such modes not under-estimated, with blocks down to 1/155 of the decay time (the slow part
+      of a block's error is the mode's amplitude, which leaves f and ξ alone); the flag stays in
+      numbers, ``SelectedModes.block_too_short``, and in ``Result.warnings``.
     - ``lag``, the sentence of :func:`~modaluq.identification.short_lag_warning` that identify()
       added (Python's own words; lags shorter than one period of the band's lower edge): kept when
-      a selected mode or a dropped cluster lies near that edge (below LAG_PERIODS f_low) with a
-      period longer than the lags, or when no mode is selected.
+      a pole of the diagram not rejected by its own checks (``pole_frequency_hz``; without it, a
+      selected mode or a dropped cluster) lies near that edge, below LAG_PERIODS f_low, with a
+      period longer than the lags (a mode there is identified with too short lags, or missed: its
+      poles do not stabilise), or when no mode is selected.
     """
     out = list(result.warnings)
     drop = set()
     if result.slow_decay is not None:
-        k = result.warning_codes.index(IdentificationWarning.SLOW_DECAY)
-        said = _slow_decay_of_selection(result, selected) if selected.n_modes and result.n_blocks else None
-        if said is None:
-            drop.add(k)
-        else:
-            out[k] = said
+        drop.add(result.warning_codes.index(IdentificationWarning.SLOW_DECAY))
     python_words = [k for k, c in enumerate(result.warning_codes) if c is None and out[k] == lag]
-    if lag is not None and python_words and not _lags_matter(result, selected):
+    if lag is not None and python_words and not _lags_matter(result, selected, pole_frequency_hz):
         drop.update(python_words)
     return [w for k, w in enumerate(out) if k not in drop]
 
 
-def _slow_decay_of_selection(result: Result, selected: SelectedModes) -> str | None:
-    """The slow-decay warning of the selected modes whose σ may be SIGMA_LOW_WARN low, or None."""
-    block_s, record_s = result.slow_decay.block_seconds, result.slow_decay.record_seconds
-    f, xi = np.asarray(selected.frequency_hz, float), np.asarray(selected.damping_ratio, float)
-    flagged = np.asarray(selected.block_too_short, bool) & (xi > 0)
-    ratio = block_sigma_ratio(block_s, f, np.where(flagged, xi, 0.0))
-    slow = flagged & (ratio < 1.0 - SIGMA_LOW_WARN)
-    if not slow.any():
-        return None
-    need_s = max(block_seconds_for_sigma(float(a), float(b)) for a, b in zip(f[slow], xi[slow]))
-    fewest = fewest_blocks(result.n_outputs)
-    fitting = int(record_s // need_s)  # blocks as long as the slowest of them needs
-    if fitting >= fewest:
-        advice = f"use n_blocks <= {fitting} (blocks of at least {need_s:.3g} s)"
-    else:
-        advice = (f"fewer blocks cannot help: the rules need at least {fewest} blocks, and {fewest} blocks of "
-                  f"{need_s:.3g} s need a record of at least {fewest * need_s:.3g} s (this one has "
-                  f"{record_s:.3g} s)")
-    low = ", ".join(f"{x:.4g} Hz up to {100 * (1 - r):.0f} % low" for x, r in zip(f[slow], ratio[slow]))
-    return (f"{int(slow.sum())} of the {selected.n_modes} selected modes decay slowly for blocks of {block_s:.3g} s "
-            f"(decay time 1/(2 pi f xi) up to {float((1.0 / (2 * np.pi * f[slow] * xi[slow])).max()):.3g} s): "
-            f"their standard deviations may be under-estimated ({low}); {advice}")
-
-
-def _lags_matter(result: Result, selected: SelectedModes) -> bool:
-    """Whether lags shorter than one period of the band's lower edge concern this selection: a
-    selected mode or a dropped cluster near that edge (below LAG_PERIODS f_low) whose period is
-    longer than the lags, or no mode selected at all."""
+def _lags_matter(result: Result, selected: SelectedModes, pole_frequency_hz=None) -> bool:
+    """Whether lags shorter than one period of the band's lower edge concern this run: a pole of
+    the diagram (or a selected mode or dropped cluster) near that edge (below LAG_PERIODS f_low)
+    whose period is longer than the lags, or no mode selected at all."""
     if not selected.n_modes:
         return True
     band = result.settings.get("frequency_range")
@@ -151,7 +119,10 @@ def _lags_matter(result: Result, selected: SelectedModes) -> bool:
         return True
     spanned = result.fs / result.settings["block_rows"]  # the lowest frequency whose period the lags span
     near = min(spanned, LAG_PERIODS * band[0])
-    found = np.concatenate([np.asarray(selected.frequency_hz, float), np.asarray(selected.dropped_frequency_hz, float)])
+    if pole_frequency_hz is None:
+        pole_frequency_hz = np.concatenate([np.asarray(selected.frequency_hz, float),
+                                            np.asarray(selected.dropped_frequency_hz, float)])
+    found = np.asarray(pole_frequency_hz, float)
     return bool(np.any((found >= band[0]) & (found < near)))
 
 
@@ -293,9 +264,10 @@ class Analysis:
         :attr:`warnings` and, with ``issue_warnings`` (default), issued as :class:`ModalUQWarning`;
         threads running analyses at once pass False (Python's warning filters are global state).
         A warning is kept only when what it says concerns the selected modes (docs/settings.md,
-        "Warnings that mean something"): poles decaying more slowly than the blocks are long, when
-        a selected mode's σ may be under-estimated by 15 % or more; lags shorter than a period of
-        the band's lower edge, when a mode or a dropped cluster lies near that edge or none is found.
+        "Warnings that mean something"): lags shorter than a period of the band's lower edge, when
+        a pole of the diagram not rejected lies near that edge or no mode is found; poles decaying more slowly
+        than the blocks are long are not said (their σ of f and ξ hold; ``SelectedModes.block_too_short``
+        keeps the flag).
         """
         issue_warnings = check_boolean("issue_warnings", issue_warnings)
         step = progress or (lambda _: None)
@@ -313,7 +285,9 @@ class Analysis:
         self.selected = select_modes(self.diagram, self.clustering)
         lag = short_lag_warning(result.settings["block_rows"], pre.fs, pre.y.shape[1], pre.frequency_range,
                                 automatic=s.block_rows is None)
-        self.warnings = tuple(_warnings_of_selection(result, self.selected, lag))
+        plausible = ~self.diagram.is_status(PoleStatus.REJECTED)  # rejected: ξ out of range, outside the band ...
+        self.warnings = tuple(_warnings_of_selection(result, self.selected, lag,
+                                                     self.diagram.frequency_hz[plausible]))
         if issue_warnings:
             for w in self.warnings:
                 warnings.warn(w, ModalUQWarning, stacklevel=2)

@@ -38,13 +38,10 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-import numpy as np
-
 from .checks import available_memory, check_integer, check_real, check_sampling_frequency, estimate_cost
 
 __all__ = ["ChosenSettings", "choose_settings", "LAG_PERIODS", "CENTRE_PERIODS", "MAX_ROWS", "MAX_ORDER", "MIN_ORDER",
-           "XI_REF", "MIN_BLOCKS", "MAX_BLOCKS", "minimum_samples", "fewest_blocks", "block_sigma_ratio",
-           "block_seconds_for_sigma", "DECAY_CORRELATION", "SIGMA_LOW_WARN"]
+           "XI_REF", "MIN_BLOCKS", "MAX_BLOCKS", "minimum_samples", "fewest_blocks"]
 
 LAG_PERIODS = 2.0   #: periods of the lowest frequency of interest spanned by the lags
 CENTRE_PERIODS = 10.0  #: periods of the band's geometric centre spanned by the lags
@@ -55,50 +52,12 @@ MAX_ORDER = 100     #: largest automatic order
 XI_REF = 0.01       #: damping ratio (fraction) assumed for the block-length rule
 MIN_BLOCKS = 10     #: fewest automatic blocks (before the 2 l + 3 rule)
 MAX_BLOCKS = 50     #: most automatic blocks (the paper's number)
-#: correlation time of a mode's estimation error, as a fraction of its decay time 1/(2π f ξ)
-#: (docs/settings.md, "Warnings that mean something": fitted to the chain's mode 1 at 25-200 blocks
-#: and the beam-like case's 0.3 %-damped mode, whose σ stay calibrated with blocks of 0.36 decay times)
-DECAY_CORRELATION = 1.0 / 16.0
-SIGMA_LOW_WARN = 0.15  #: a slowly decaying mode is warned of when its σ may be this much (fraction) low
 
 
 def fewest_blocks(n_outputs: int) -> int:
     """The rules' fewest blocks, max(MIN_BLOCKS, 2 l + 3): 2 l + 3 give every mode's joint
     covariance full rank. Advice never asks for fewer."""
     return max(MIN_BLOCKS, 2 * check_integer("n_outputs", n_outputs, minimum=1) + 3)
-
-
-def block_sigma_ratio(block_seconds, frequency_hz, damping_ratio):
-    """Expected σ / true σ of a mode's estimate from blocks of ``block_seconds`` when its estimation
-    error stays correlated over θ = DECAY_CORRELATION / (2π f ξ) seconds: the block estimate of a
-    variance misses the covariance between neighbouring blocks, and with an exponential correlation
-    its expectation is (1 - (θ/L)(1 - exp(-L/θ))) times the truth (batch means; docs/settings.md).
-    1 for ξ <= 0 (no decay time: the core's flag does not apply).
-
-    >>> round(float(block_sigma_ratio(16.0, 1.21, 0.003)), 2), round(float(block_sigma_ratio(31.3, 0.803, 0.00025)), 2)
-    (0.91, 0.51)
-    """
-    L = np.asarray(block_seconds, float)
-    f, xi = np.asarray(frequency_hz, float), np.asarray(damping_ratio, float)
-    theta = DECAY_CORRELATION / (2.0 * np.pi * f * np.where(xi > 0, xi, 1.0))
-    x = L / theta
-    ratio = np.sqrt(np.clip(1.0 - (1.0 - np.exp(-x)) / x, 0.0, 1.0))
-    return np.where(xi > 0, ratio, 1.0)
-
-
-def block_seconds_for_sigma(frequency_hz: float, damping_ratio: float, low: float = SIGMA_LOW_WARN) -> float:
-    """The shortest block (s) with which :func:`block_sigma_ratio` of a mode stays at least 1 - ``low``.
-
-    >>> round(block_seconds_for_sigma(1.21, 0.003), 1)
-    9.6
-    """
-    theta = DECAY_CORRELATION / (2.0 * math.pi * frequency_hz * damping_ratio)
-    target = (1.0 - low) ** 2
-    lo, hi = 1e-6, 1e6  # x = L / θ solving 1 - (1 - e^-x)/x = target (increasing in x)
-    for _ in range(100):
-        mid = math.sqrt(lo * hi)
-        lo, hi = (mid, hi) if 1.0 - (1.0 - math.exp(-mid)) / mid < target else (lo, mid)
-    return hi * theta
 
 
 @dataclass(frozen=True)
@@ -167,7 +126,7 @@ def choose_settings(n_samples: int, fs: float, n_outputs: int, *, frequency_rang
     r = l if n_references is None else check_integer("n_references", n_references, minimum=1)
     f_low = lowest_frequency(fs, frequency_range)
     reasons = []
-    nb_min = max(MIN_BLOCKS, 2 * l + 3)
+    nb_min = fewest_blocks(l)
     if block_rows is None:
         n_min = minimum_samples(l)
         if n_samples < n_min:
@@ -271,7 +230,7 @@ def _fit_memory(reasons: list, n_samples: int, l: int, r: int, p: int, orders, n
         return p, orders, n_b
     p0, n_b0 = p, n_b
     if blocks_chosen and uncertainty:
-        for fewer in (max(MIN_BLOCKS, 2 * l + 3), 2):
+        for fewer in (fewest_blocks(l), 2):
             if fewer < n_b:
                 n_b = fewer
                 if need(p, orders, n_b) <= have:

@@ -16,7 +16,7 @@ import numpy as np
 
 from . import _core
 from ._blas import single_threaded as single_threaded_blas
-from .auto_settings import capped_lag_warning, choose_settings, lag_warning
+from .auto_settings import capped_lag_warning, choose_settings, fewest_blocks, lag_warning
 from .checks import (
     as_samples,
     check_cost,
@@ -28,10 +28,11 @@ from .checks import (
 from .io import Recording, load
 from .io.campaign import Campaign, load_campaign
 from .preprocess import preprocess
-from .results import Result, result_from_core, warn_all
+from .results import IdentificationWarning, Result, result_from_core, warn_all
 from .settings import Settings
 
-__all__ = ["identify", "identify_quietly", "identify_setups", "make_settings", "short_lag_warning"]
+__all__ = ["identify", "identify_quietly", "identify_setups", "make_settings", "short_lag_warning",
+           "slow_decay_advice"]
 
 
 def make_settings(settings: Settings | None, keywords: dict, *, function: str = "identify") -> Settings:
@@ -200,8 +201,33 @@ def identify_quietly(y, u=None, *, fs: float, settings: Settings | None = None,
                             automatic=chosen is not None and any(r.startswith("block_rows") for r in chosen.reasons))
     if lag:
         extra.append(lag)
+    worded = {}
+    slow = slow_decay_advice(ident.slow_decay, y.shape[1])
+    if slow:
+        worded[IdentificationWarning.SLOW_DECAY] = slow
     return result_from_core(ident, record, y.shape[1], 0 if u is None else u.shape[1], extra_warnings=extra,
-                            output_names=names)
+                            output_names=names, worded=worded)
+
+
+def slow_decay_advice(slow, n_outputs: int) -> str | None:
+    """Python's sentence for the core's slow-decay finding (``Identification.slow_decay``: numbers)
+    when the core's advice, n_blocks <= K, would go below the rules' fewest blocks
+    (:func:`~modaluq.auto_settings.fewest_blocks`): the record length that would hold that many
+    blocks of half the decay time instead. None when the core's words stand (K at least the
+    fewest, or fewer than 2 blocks fit: a longer record)."""
+    if not slow.n_poles:
+        return None
+    fewest = fewest_blocks(n_outputs)
+    fitting = int(slow.fitting_n_blocks)
+    if fitting < 2 or fitting >= fewest:
+        return None
+    half = 0.5 * float(slow.longest_decay_s)
+    return (f"{int(slow.n_poles)} pole(s) decay more slowly than the blocks are long (blocks of "
+            f"{float(slow.block_seconds):.6g} s, less than half of the decay time 1/(2 pi f xi), up to "
+            f"{float(slow.longest_decay_s):.6g} s); n_blocks <= {fitting} would be fewer than the {fewest} blocks the "
+            f"rules need with {n_outputs} output{'s' if n_outputs > 1 else ''}: {fewest} blocks of {half:.3g} s need "
+            f"a record of at least {fewest * half:.3g} s (the selected modes' sigma of f and xi were not found "
+            "under-estimated by short blocks, docs/settings.md)")
 
 
 def _output_names(output_names, y) -> tuple:

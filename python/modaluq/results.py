@@ -384,8 +384,12 @@ class _OrderShapes:
         return tuple(f"order {self.modes.order}, mode {k + 1}" for k in range(self.modes.n_modes))
 
 
-def result_from_core(ident, settings, n_outputs, n_inputs, extra_warnings=(), output_names=()) -> Result:
-    """The :class:`Result` of the core's ``Identification`` ``ident``, which it keeps."""
+def result_from_core(ident, settings, n_outputs, n_inputs, extra_warnings=(), output_names=(), worded=None) -> Result:
+    """The :class:`Result` of the core's ``Identification`` ``ident``, which it keeps. ``worded``
+    maps an :class:`IdentificationWarning` to Python's sentence for it, in place of the core's
+    (the code stays)."""
+    codes = tuple(IdentificationWarning(c.name) for c in ident.warning_codes)
+    core_words = tuple((worded or {}).get(c, w) for c, w in zip(codes, ident.warnings))
     result = Result(
         output_names=tuple(output_names) or tuple(f"y{k}" for k in range(n_outputs)),
         modes=tuple(Modes._from_core(m) for m in ident.modes),
@@ -407,8 +411,8 @@ def result_from_core(ident, settings, n_outputs, n_inputs, extra_warnings=(), ou
         signal_to_noise=float(ident.signal_to_noise),
         low_signal_to_noise=bool(ident.low_signal_to_noise),
         significant_singular_values=int(ident.significant_singular_values),
-        warnings=tuple(ident.warnings) + tuple(extra_warnings),
-        warning_codes=tuple(IdentificationWarning(c.name) for c in ident.warning_codes) + (None,) * len(extra_warnings),
+        warnings=core_words + tuple(extra_warnings),
+        warning_codes=codes + (None,) * len(extra_warnings),
         slow_decay=SlowDecay._from_core(ident.slow_decay),
     )
     object.__setattr__(result, "_identification", ident)

@@ -99,32 +99,22 @@ def test_analysis_equals_identify_diagram_and_selection(sim):
     json.dumps(report)  # plain values
 
 
-def _said(a, code):
-    """The analysis's warnings of one kind: the slow-decay one (its slot in the Result by code,
-    reworded by the analysis) or the short-lags one (the sentence short_lag_warning makes)."""
+def _short_lags(a):
+    """The analysis's short-lags warning (the sentence short_lag_warning makes), if said."""
     from modaluq.identification import short_lag_warning
-    from modaluq.results import IdentificationWarning
 
-    s = a.identification_settings()
     lag = short_lag_warning(a.result.settings["block_rows"], a.result.fs, a.result.n_outputs,
-                            a.preprocessed.frequency_range, automatic=s.block_rows is None)
-    if code == "slow_decay":
-        core = list(a.result.warnings)
-        if IdentificationWarning.SLOW_DECAY not in a.result.warning_codes:
-            return []
-        del core[a.result.warning_codes.index(IdentificationWarning.SLOW_DECAY)]
-        return [w for w in a.warnings if w not in core and w != lag]
+                            a.preprocessed.frequency_range, automatic=a.identification_settings().block_rows is None)
     return [w for w in a.warnings if w == lag]
 
 
 @pytest.mark.parametrize("n_blocks", [100, 200])
-def test_the_slow_decay_warning_is_not_said_when_the_sigma_it_doubts_holds(n_blocks):
-    # 400 s of the paper's chain: blocks of 4 s (100 blocks) or 2 s (200). The core's warning
-    # counts every pole whose decay time 1/(2π f ξ) is more than twice a block, spurious ones with
-    # ξ near 0 included. With 200 blocks mode 1 (1.93 Hz, ξ 2 %) is flagged, but blocks of 1.98 s
-    # leave its σ about 7 % low at most (block_sigma_ratio; the Monte Carlo of docs/validation.md
-    # finds its σ unchanged from 25 to 200 blocks): nothing is said
-    from modaluq.auto_settings import block_sigma_ratio
+def test_the_slow_decay_warning_is_not_said_of_the_selected_modes(n_blocks):
+    # 400 s of the paper's chain: blocks of 4 s (100 blocks) or 2 s (200). The core flags every
+    # pole whose decay time 1/(2π f ξ) is more than twice a block; with 200 blocks mode 1 (1.93 Hz,
+    # ξ 2 %) is one. Short blocks were not found to lower the σ of f and ξ (docs/settings.md,
+    # "Warnings that mean something"): the analysis does not say it; the flag stays in numbers
+    from modaluq.results import IdentificationWarning
 
     sim = modaluq.simulate(20_000, seed=3)
     settings = Settings(orders=tuple(range(2, 25, 2)), n_blocks=n_blocks)
@@ -132,57 +122,68 @@ def test_the_slow_decay_warning_is_not_said_when_the_sigma_it_doubts_holds(n_blo
         warnings.simplefilter("always")
         a = Analysis.from_arrays(sim.y, fs=sim.fs, settings=settings).run(check_harmonics=False)
     issued = [str(w.message) for w in caught if issubclass(w.category, modaluq.ModalUQWarning)]
-    assert issued == list(a.warnings)
-    assert a.result.slow_decay is not None  # the core's finding is still there, in numbers
+    assert issued == list(a.warnings) == []
+    assert IdentificationWarning.SLOW_DECAY in a.result.warning_codes and a.result.slow_decay is not None
     sel = a.selected
     block_s = a.result.block_length / a.result.fs
     slow = block_s < 0.5 / (2 * np.pi * sel.frequency_hz * sel.damping_ratio)
     assert slow.tolist() == ([True] + [False] * 5 if n_blocks == 200 else [False] * 6)
-    assert np.all(block_sigma_ratio(block_s, sel.frequency_hz, sel.damping_ratio) > 0.85)
-    assert _said(a, "slow_decay") == [] and a.warnings == ()
+    np.testing.assert_array_equal(sel.block_too_short, slow)
 
 
-def test_the_slow_decay_warning_fires_with_advice_the_rules_allow():
-    # mode 1 at ξ 0.1 % (decay time 82 s) in 400 s cut into 200 blocks of 2 s: σ may be about half
-    # the truth; n_blocks <= K with K at least the rules' fewest blocks (max(10, 2 l + 3))
-    from modaluq.auto_settings import block_seconds_for_sigma, fewest_blocks
+def test_the_slow_decay_advice_never_goes_below_the_rules_fewest_blocks():
+    from types import SimpleNamespace
 
-    sim = modaluq.simulate(20_000, seed=0, damping_ratio=[0.001] + [0.02] * 5)
-    a = Analysis.from_arrays(sim.y, fs=sim.fs, settings=Settings(frequency_range=(1, 20), block_rows=40,
-                                                                 n_blocks=200)).run(check_harmonics=False,
-                                                                                    issue_warnings=False)
-    said = _said(a, "slow_decay")
-    assert len(said) == 1 and "1.93 Hz up to " in said[0]
-    k = int(np.argmin(abs(a.selected.frequency_hz - 1.93)))
-    need = block_seconds_for_sigma(a.selected.frequency_hz[k], a.selected.damping_ratio[k])
-    fitting = int(a.result.slow_decay.record_seconds // need)
-    assert fitting >= fewest_blocks(3) and f"use n_blocks <= {fitting} " in said[0]
-    # a record too short for the rules' fewest blocks of that length: the record length is the advice
-    short = Analysis.from_arrays(sim.y[:4000], fs=sim.fs, settings=Settings(frequency_range=(1, 20), block_rows=20,
-                                                                            n_blocks=40)).run(check_harmonics=False,
-                                                                                              issue_warnings=False)
-    said = _said(short, "slow_decay")
-    assert len(said) == 1 and "use n_blocks" not in said[0] and "need a record of at least" in said[0]
+    from modaluq.identification import slow_decay_advice
+
+    def finding(fitting, longest=44.0):
+        return SimpleNamespace(n_poles=3, block_seconds=16.0, longest_decay_s=longest, record_seconds=400.0,
+                               fitting_n_blocks=fitting)
+
+    # 8 outputs: the rules need max(10, 2*8 + 3) = 19 blocks. K = 18 is below: the record length is said
+    said = slow_decay_advice(finding(18), 8)
+    assert "n_blocks <= 18 would be fewer than the 19 blocks" in said and "at least 418 s" in said
+    assert slow_decay_advice(finding(19), 8) is None  # the core's "use n_blocks <= 19" stands
+    assert slow_decay_advice(finding(1), 8) is None   # the core's "a longer record is needed" stands
+    assert slow_decay_advice(SimpleNamespace(n_poles=0), 8) is None
+    assert slow_decay_advice(finding(12), 3) is None  # 3 outputs: 10 blocks are enough
 
 
-def test_the_short_lags_warning_fires_only_for_modes_near_the_low_edge():
+def test_the_short_lags_warning_fires_when_a_mode_near_the_low_edge_is_missed():
+    # the paper's chain with block_rows 8 at 50 Hz: lags of 0.16 s, a third of the period of mode 1
+    # (1.93 Hz) near the band's 1 Hz edge. Mode 1 is missed; some of its poles pass their own
+    # checks (not rejected) but do not stabilise: said
+    from modaluq import PoleStatus
+
+    sim = modaluq.simulate(20_000, seed=0)
+    a = Analysis.from_arrays(sim.y, fs=sim.fs, settings=Settings(frequency_range=(1, 20), block_rows=8)).run(
+        check_harmonics=False, issue_warnings=False)
+    assert not np.any(abs(a.selected.frequency_hz - 1.93) < 0.1)
+    d = a.diagram
+    assert np.any((d.frequency_hz >= 1) & (d.frequency_hz < 2) & ~d.is_status(PoleStatus.REJECTED))
+    assert len(_short_lags(a)) == 1 and "use block_rows >= 50" in _short_lags(a)[0]
+    # with lags of 0.8 s (block_rows 40) the edge's period is still not spanned, but every pole
+    # near it has its period within the lags: mode 1 found, nothing said
+    b = Analysis.from_arrays(sim.y, fs=sim.fs, settings=Settings(frequency_range=(1, 20), block_rows=40)).run(
+        check_harmonics=False, issue_warnings=False)
+    assert np.any(abs(b.selected.frequency_hz - 1.93) < 0.05) and _short_lags(b) == []
+
+
+def test_the_short_lags_warning_is_not_said_when_no_pole_lies_near_the_low_edge():
     # 8 outputs cap H at 300 rows: 37 block rows at 50 Hz are 0.74 s, under one period of a band
-    # edge at 0.5 or 1 Hz. With the band from 0.5 Hz the first mode (1.21 Hz) lies above twice the
-    # edge: it is found with a calibrated σ (docs/settings.md) and nothing is said. With the band
-    # from 1 Hz it lies near the edge, under the 1.35 Hz whose period the lags span: said
-    sim = modaluq.simulate(20_000, seed=1, n_dof=10, output_dofs=(0, 1, 2, 4, 5, 7, 8, 9),
-                           damping_ratio=[0.003] + [0.01] * 9)
-    said = {}
-    for lo in (0.5, 1.0):
-        a = Analysis.from_arrays(sim.y, fs=sim.fs, settings=Settings(frequency_range=(lo, 20))).run(
-            check_harmonics=False, issue_warnings=False)
-        assert a.result.settings["block_rows"] == 37 and abs(a.selected.frequency_hz[0] - 1.209) < 0.01
-        said[lo] = _said(a, "short_lags")
-    assert said[0.5] == [] and len(said[1.0]) == 1
-    # identify() alone, without a selection to judge by, still says it
+    # edge at 0.5 Hz. The first mode (1.21 Hz, ξ 0.3 %) lies above twice the edge and no pole lies
+    # below it: every mode is found with a calibrated σ (docs/settings.md), nothing is said.
+    # identify() alone, without a diagram to judge by, still says it
     from modaluq.identification import identify_quietly
 
-    assert said[1.0][0] in identify_quietly(sim.y, fs=sim.fs, frequency_range=(1.0, 20)).warnings
+    sim = modaluq.simulate(20_000, seed=1, n_dof=10, output_dofs=(0, 1, 2, 4, 5, 7, 8, 9),
+                           damping_ratio=[0.003] + [0.01] * 9)
+    a = Analysis.from_arrays(sim.y, fs=sim.fs, settings=Settings(frequency_range=(0.5, 20))).run(
+        check_harmonics=False, issue_warnings=False)
+    assert a.result.settings["block_rows"] == 37 and a.selected.n_modes == 10
+    assert abs(a.selected.frequency_hz[0] - 1.209) < 0.01 and _short_lags(a) == []
+    raw = identify_quietly(sim.y, fs=sim.fs, frequency_range=(0.5, 20)).warnings
+    assert any(w.startswith("the automatic block_rows = 37") for w in raw)
 
 
 def test_with_settings_keeps_the_preprocessed_record_only_when_its_fields_do_not_change(sim):

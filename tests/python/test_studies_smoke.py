@@ -59,8 +59,10 @@ def test_warnings_issue27(capsys, tmp_path):
 
 @pytest.mark.slow
 def test_warnings_issue27_premise(capsys):
-    _module("warnings_issue27_premise").main(200, seeds=range(2))
-    assert "200 blocks: mode 1 found in 2 of 2 runs" in capsys.readouterr().out
+    study = _module("warnings_issue27_premise")
+    assert study.main("chain", 200, seeds=range(2)).shape == (2, 4)
+    assert study.main("mass-0.0005", 20, seeds=range(2)).shape[1] == 4
+    assert "chain, 200 blocks of 2 s" in capsys.readouterr().out
 
 
 @pytest.mark.slow
