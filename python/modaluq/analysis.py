@@ -88,7 +88,7 @@ def _warnings_of_selection(result: Result, selected: SelectedModes, lag: str | N
 
     - Slowly decaying poles (``Result.slow_decay``, the core's flag of poles whose decay time
       1/(2π f ξ) is more than twice a block): not said. Monte Carlo finds the σ of f and ξ of
-      such modes not under-estimated, with blocks down to 1/155 of the decay time (the slow part
+      such modes not under-estimated, with blocks down to 1/170 of the decay time (the slow part
       of a block's error is the mode's amplitude, which leaves f and ξ alone); the flag stays in
       numbers, ``SelectedModes.block_too_short``, and in ``Result.warnings``.
     - ``lag``, the sentence of :func:`~modaluq.identification.short_lag_warning` that identify()
