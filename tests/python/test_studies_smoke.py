@@ -62,7 +62,7 @@ def test_warnings_issue27_premise(capsys):
     study = _module("warnings_issue27_premise")
     assert study.main("chain", 200, seeds=range(2)).shape == (2, 4)
     assert study.main("mass-0.0005", 20, seeds=range(2)).shape[1] == 4
-    assert "chain, 200 blocks of 2 s" in capsys.readouterr().out
+    assert "chain, 200 blocks of 1.98 s" in capsys.readouterr().out
 
 
 @pytest.mark.slow
