@@ -44,7 +44,8 @@ def test_every_study_is_smoke_tested():
     scripts = {p.name for p in HIGH_ORDERS.glob("*.py")} | {p.name for p in STUDIES.glob("*.py")}
     tested = set(HIGH_ORDER_RUNS) | {"prop.py", "earthquake_records.py", "settings_records.py", "selected_sigma_mc.py",
                                            "indicators_mc.py", "multisetup_mc.py", "automac_mc.py",
-                                           "warnings_issue27.py", "warnings_issue27_premise.py"}
+                                           "warnings_issue27.py", "warnings_issue27_premise.py",
+                                           "io_block_bias.py"}
     assert scripts == tested
 
 
@@ -91,6 +92,13 @@ def test_multisetup_mc(capsys):
     out = _module("multisetup_mc").main(n=2, configs=["output-only"])
     assert set(out) == {"output-only"} and len(out["output-only"]) == 2
     assert "| mode | f (Hz) | method |" in capsys.readouterr().out
+
+
+@pytest.mark.slow
+def test_io_block_bias(capsys):
+    out = _module("io_block_bias").main(n_records=3, n_samples=4000, n_reference=20_000)
+    assert out["est"]["columns"].shape == (3, 4, 12) and out["K"].shape == (12,)
+    assert "| n_blocks | estimator | f: mean σ/σ_MC |" in capsys.readouterr().out
 
 
 def test_settings_records_without_data(capsys, tmp_path):
