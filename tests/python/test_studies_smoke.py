@@ -43,7 +43,7 @@ def _script(monkeypatch, name, *args):
 def test_every_study_is_smoke_tested():
     scripts = {p.name for p in HIGH_ORDERS.glob("*.py")} | {p.name for p in STUDIES.glob("*.py")}
     tested = set(HIGH_ORDER_RUNS) | {"prop.py", "earthquake_records.py", "settings_records.py", "selected_sigma_mc.py",
-                                           "indicators_mc.py", "multisetup_mc.py"}
+                                           "indicators_mc.py", "multisetup_mc.py", "poser_mc.py"}
     assert scripts == tested
 
 
@@ -67,6 +67,16 @@ def test_multisetup_mc(capsys):
     out = _module("multisetup_mc").main(n=2, configs=["output-only"])
     assert set(out) == {"output-only"} and len(out["output-only"]) == 2
     assert "| mode | f (Hz) | method |" in capsys.readouterr().out
+
+
+@pytest.mark.slow
+def test_poser_mc(capsys):
+    out = _module("poser_mc").main(n=3, configs=["output-only"])
+    assert set(out) == {"output-only"} and len(out["output-only"]) == 3
+    out = _module("poser_mc").main(n=2, configs=["diagram", "input/output"])
+    assert set(out) == {"input/output"} and out["input/output"][0]["poser"].shape == (6, 2)
+    text = capsys.readouterr().out
+    assert "| mode | f (Hz) | method |" in text and "MC std f modular/PoSER" in text
 
 
 def test_settings_records_without_data(capsys, tmp_path):
