@@ -8,4 +8,5 @@ void bind_identify(pybind11::module_& m);
 void bind_stabilization(pybind11::module_& m);
 void bind_indicators(pybind11::module_& m);
 void bind_multisetup(pybind11::module_& m);
+void bind_poser(pybind11::module_& m);
 }  // namespace modaluq::python

@@ -27,6 +27,7 @@ from .buildinfo import show_config
 from .geometry import Geometry
 from .horizons import HorizonCheck, check_horizons
 from .identification import identify, identify_setups
+from .poser import PoserResult, ReferenceMismatchWarning
 from .results import ModalUQWarning, Modes, Result
 from .selection import SelectedModes, select_modes
 from .settings import ClusteringSettings, PoleStatus, Settings, StabilityCriteria
@@ -47,6 +48,8 @@ __all__ = [
     "Monitoring",
     "NumericalError",
     "PoleStatus",
+    "PoserResult",
+    "ReferenceMismatchWarning",
     "Result",
     "SelectedModes",
     "Settings",

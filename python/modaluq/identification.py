@@ -27,6 +27,7 @@ from .checks import (
 )
 from .io import Recording, load
 from .io.campaign import Campaign, load_campaign
+from .poser import check_references_after_modular, identify_poser
 from .preprocess import preprocess
 from .results import IdentificationWarning, Result, result_from_core, warn_all
 from .settings import Settings
@@ -241,7 +242,8 @@ def _output_names(output_names, y) -> tuple:
 
 
 def identify_setups(setups, *, fs=None, references: Sequence[str] | None = None,
-                    inputs: Sequence[str] | None = None, settings: Settings | None = None, **keywords) -> Result:
+                    inputs: Sequence[str] | None = None, settings: Settings | None = None,
+                    method: str = "modular", **keywords):
     """Identify a campaign measured in several setups, merged into global mode shapes with their σ.
 
     The modular merge of Döhler & Mevel (2012) with the first-order covariance of Döhler, Lam &
@@ -272,6 +274,15 @@ def identify_setups(setups, *, fs=None, references: Sequence[str] | None = None,
     inputs : sequence of str, optional
         Names of measured-input columns (input/output); in each setup the columns with these
         names are its inputs (a setup may have none: it is then output-only).
+    method : {"modular", "poser"}
+        ``"modular"`` (default): the merge above, returning a :class:`Result`. ``"poser"``: each
+        setup identified and its modes selected alone, then merged (f and ξ by inverse-variance
+        weights, shapes rescaled on the references, σ propagated; docs/uq-math.md §13.5, §13.9),
+        returning a :class:`~modaluq.poser.PoserResult` whose ``select_modes()`` gives the merged
+        modes over the same global DOFs. With either, each setup's reference components are
+        tested against the others' (a mislabelled or moved reference issues a
+        :class:`~modaluq.poser.ReferenceMismatchWarning` naming the setup, the channel and the
+        mode); for the modular merge this identifies each setup alone once more.
     settings, **keywords
         As for :func:`identify`: ``block_rows``, ``past_block_rows``, ``orders``, ``n_blocks``
         (per setup), ``uncertainty``, ``input_rcond``, ``threads`` and the preprocessing
@@ -287,6 +298,8 @@ def identify_setups(setups, *, fs=None, references: Sequence[str] | None = None,
     TypeError
         A setup that is none of the records above (named), or a single string of references.
     """
+    if method not in ("modular", "poser"):
+        raise ValueError(f"method must be 'modular' or 'poser'; got {method!r}")
     if isinstance(setups, (str, os.PathLike)) and str(setups).lower().endswith(".toml"):
         setups = load_campaign(setups)
     base = settings
@@ -326,6 +339,15 @@ def identify_setups(setups, *, fs=None, references: Sequence[str] | None = None,
             cov = _core.compute_covariances(y.T, u_t, lay, s.n_blocks if s.uncertainty else 1, s.demean,
                                             s.uncertainty, s.threads)
         core_setups.append(_core.SetupData(cov, list(range(r)), rate))
+    names_per_setup = [refs + dof_names[r + sum(w for _, _, w in records[:j]):][:w]
+                       for j, (_, _, w) in enumerate(records)]
+    n_inputs_per_setup = [0 if u is None else u.shape[1] for _, u, _ in records]
+    if method == "poser":
+        record = s.record(rate, l_g)
+        record.update(references=list(range(r)), reference_names=refs,
+                      frequency_range=None if band is None else list(band))
+        with naming_settings_on_memory_error(s):
+            return identify_poser(core_setups, o, record, names_per_setup, n_inputs_per_setup, dof_names, refs)
     with single_threaded_blas(), naming_settings_on_memory_error(s):
         ident = _core.identify_setups(core_setups, o)
     record = s.record(rate, l_g)
@@ -337,6 +359,8 @@ def identify_setups(setups, *, fs=None, references: Sequence[str] | None = None,
     n_in = max((0 if u is None else u.shape[1]) for _, u, _ in records)
     result = result_from_core(ident, record, l_g, n_in, output_names=dof_names)
     warn_all(result)
+    single = dict(record, setups=None)
+    check_references_after_modular(core_setups, o, single, names_per_setup, n_inputs_per_setup, refs)
     return result
 
 

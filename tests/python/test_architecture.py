@@ -33,7 +33,7 @@ LAYERS = {
     "modaluq.selection": 4,
     "modaluq.stabilization": 5,
     "modaluq.results": 6,
-    "modaluq.identification": 7, "modaluq.streaming": 7,
+    "modaluq.identification": 7, "modaluq.streaming": 7, "modaluq.poser": 7,
     "modaluq.horizons": 8, "modaluq.analysis": 8, "modaluq.campaign_analysis": 8, "modaluq.validation.*": 8,
     "modaluq.monitoring.*": 9,  # the wing, many records: its modules in WING order
     "modaluq.cli.*": 10,

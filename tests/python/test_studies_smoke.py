@@ -45,7 +45,7 @@ def test_every_study_is_smoke_tested():
     tested = set(HIGH_ORDER_RUNS) | {"prop.py", "earthquake_records.py", "settings_records.py", "selected_sigma_mc.py",
                                            "indicators_mc.py", "multisetup_mc.py", "automac_mc.py",
                                            "warnings_issue27.py", "warnings_issue27_premise.py",
-                                           "io_block_bias.py"}
+                                           "io_block_bias.py", "poser_mc.py"}
     assert scripts == tested
 
 
@@ -99,6 +99,15 @@ def test_io_block_bias(capsys):
     out = _module("io_block_bias").main(n_records=3, n_samples=4000, n_reference=20_000)
     assert out["est"]["columns"].shape == (3, 4, 12) and out["K"].shape == (12,)
     assert "| n_blocks | estimator | f: mean σ/σ_MC |" in capsys.readouterr().out
+
+
+def test_poser_mc(capsys):
+    out = _module("poser_mc").main(n=3, configs=["output-only"])
+    assert set(out) == {"output-only"} and len(out["output-only"]) == 3
+    out = _module("poser_mc").main(n=2, configs=["diagram", "input/output"])
+    assert set(out) == {"input/output"} and out["input/output"][0]["poser"].shape == (6, 2)
+    text = capsys.readouterr().out
+    assert "| mode | f (Hz) | method |" in text and "MC std f modular/PoSER" in text
 
 
 def test_settings_records_without_data(capsys, tmp_path):

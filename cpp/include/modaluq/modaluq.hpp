@@ -10,6 +10,7 @@
 #include "layout.hpp"
 #include "modal.hpp"
 #include "multisetup.hpp"
+#include "poser.hpp"
 #include "realization.hpp"
 #include "selection.hpp"
 #include "stabilization.hpp"
