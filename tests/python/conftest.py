@@ -25,3 +25,17 @@ def chain_10k():
 def relative_error(a, b):
     a, b = np.asarray(a), np.asarray(b)
     return float(np.max(np.abs(a - b) / np.maximum(np.abs(b), 1e-300)))
+
+
+@pytest.fixture()
+def one_line_error(capsys):
+    """``check(status)``: a command failed with status 2 and a one-line message (no traceback); returns it."""
+
+    def check(status):
+        _, err = capsys.readouterr()
+        assert status == 2, err
+        lines = err.strip().splitlines()
+        assert len(lines) == 1 and "Traceback" not in err, err
+        return lines[0]
+
+    return check
