@@ -279,7 +279,9 @@ th{background:#f4f4f4}pre{background:#f7f7f7;padding:8px;font-size:.85em;white-s
 .warn{color:#a33}.note{color:#555;font-size:.9em}"""
 
 
-#: Draws each mode's figure when it comes into view; records in ``body[data-rendered]`` how many
+#: Draws the first mode's figure when the page has loaded and each other one when it comes into
+#: view (an IntersectionObserver's first notice waits for a rendered frame, which headless
+#: browsers do not always produce: the first mode stayed blank there); records in ``body[data-rendered]`` how many
 #: figures are drawn and in ``body[data-rendered-ms]`` when the last one was (performance.now(),
 #: what the browser test reads).
 LAZY_SCRIPT = """(function(){
@@ -293,7 +295,7 @@ var lazy=document.querySelectorAll('.lazy-plot');
 if('IntersectionObserver' in window){var io=new IntersectionObserver(function(es){es.forEach(function(e){
 if(e.isIntersecting){draw(e.target);io.unobserve(e.target);}});},{rootMargin:'200px'});
 lazy.forEach(function(el){io.observe(el);});}else{lazy.forEach(draw);}
-window.addEventListener('load',mark);})();"""
+window.addEventListener('load',function(){mark();if(lazy.length)draw(lazy[0]);});})();"""
 
 
 def write_html_report(path, diagram, selected, *, geometry=None, spectrum=None, title: str = "",
