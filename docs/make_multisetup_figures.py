@@ -9,7 +9,6 @@ import warnings
 from pathlib import Path
 
 import numpy as np
-import pandas as pd
 
 import modaluq
 from modaluq.simulate.campaign import simulate_campaign
@@ -18,7 +17,7 @@ ROOT = Path(__file__).resolve().parents[1]
 IMG = ROOT / "docs" / "img"
 
 camp = simulate_campaign(1)
-setups = [pd.DataFrame(s.y, columns=list(s.channels)) for s in camp.setups]
+setups = camp.frames()
 with warnings.catch_warnings():
     warnings.simplefilter("ignore", modaluq.ModalUQWarning)
     result = modaluq.identify_setups(setups, fs=camp.fs, references=["L3", "R8"], block_rows=20,

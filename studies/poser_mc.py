@@ -24,7 +24,6 @@ import time
 import warnings
 
 import numpy as np
-import pandas as pd
 
 import modaluq
 from modaluq import _core
@@ -154,12 +153,7 @@ def report(name, runs, truth_f, kref):
 def run_diagram(seed, kw, io):
     """f and σ_f of the selected modes nearest each true mode, both methods, public API."""
     c = simulate_campaign(seed, **kw)
-    frames = []
-    for st in c.setups:
-        df = pd.DataFrame(st.y, columns=list(st.channels))
-        if io:
-            df["F5"] = st.u[:, 0]
-        frames.append(df)
+    frames = c.frames(input_names=["F5"] if io else ())
     out = {}
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")

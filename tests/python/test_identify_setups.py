@@ -11,13 +11,7 @@ ORDERS = list(range(2, 25, 2))
 
 
 def _frames(camp, io=False):
-    out = []
-    for s in camp.setups:
-        df = pd.DataFrame(s.y, columns=list(s.channels))
-        if io:
-            df["F5"] = s.u[:, 0]
-        out.append(df)
-    return out
+    return camp.frames(input_names=["F5"] if io else ())
 
 
 @pytest.fixture(scope="module")

@@ -6,7 +6,6 @@ import sys
 import warnings
 
 import numpy as np
-import pandas as pd
 import pytest
 
 import modaluq
@@ -21,12 +20,9 @@ KW = dict(block_rows=15, orders=ORDERS, n_blocks=20)  # each setup alone: >= 2 l
 
 
 def _frames(camp, swap_in=None):
-    out = []
-    for j, s in enumerate(camp.setups):
-        df = pd.DataFrame(s.y, columns=list(s.channels))
-        if j == swap_in:  # the two references' labels swapped in this setup
-            df = df.rename(columns={"L3": "R8", "R8": "L3"})
-        out.append(df)
+    out = camp.frames()
+    if swap_in is not None:  # the two references' labels swapped in this setup
+        out[swap_in] = out[swap_in].rename(columns={"L3": "R8", "R8": "L3"})
     return out
 
 

@@ -88,6 +88,20 @@ class SimulatedCampaign:
     mode_names: tuple
     dofs: tuple = DECK_DOFS
 
+    def frames(self, input_names=()) -> list:
+        """Each setup as a pandas DataFrame, what :func:`modaluq.identify_setups` takes: one column
+        per channel named by its DOF, then the measured forces named ``input_names`` (one name
+        per input; none by default, so a setup is output-only)."""
+        import pandas as pd
+
+        out = []
+        for s in self.setups:
+            df = pd.DataFrame(s.y, columns=list(s.channels))
+            for k, name in enumerate(input_names):
+                df[name] = s.u[:, k]
+            out.append(df)
+        return out
+
 
 def simulate_campaign(seed=None, *, durations=DEFAULT_DURATIONS, roving=DEFAULT_ROVING,
                       references=DEFAULT_REFERENCES, fs=25.0, input_dofs=(), input_std=1.0,
