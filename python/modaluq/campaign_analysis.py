@@ -19,7 +19,7 @@ import numpy as np
 
 from .analysis import describe_orders
 from .checks import check_boolean, check_instance
-from .identification import identify_setups, make_settings
+from .identification import campaign_settings, identify_setups, make_settings
 from .io import Campaign, load_campaign
 from .preprocess import preprocess
 from .provenance import provenance
@@ -61,11 +61,7 @@ class CampaignAnalysis:
         :func:`~modaluq.identify_setups` (``block_rows``, ``orders``, ``frequency_range``, ...)
         replace the campaign's."""
         check_instance("campaign", campaign, Campaign)
-        try:
-            base = make_settings(None, dict(campaign.settings), function="identify_setups")
-        except (TypeError, ValueError) as exc:
-            raise ValueError(f"{campaign.source or 'campaign'}: [settings]: {exc}") from None
-        settings = make_settings(base, keywords, function="identify_setups")
+        settings = make_settings(campaign_settings(campaign), keywords, function="identify_setups")
         refs = campaign.references if references is None else tuple(str(r) for r in references)
         ins = campaign.inputs if inputs is None else tuple(str(c) for c in inputs)
         return cls(campaign=campaign, references=tuple(refs), inputs=tuple(ins),

@@ -302,12 +302,7 @@ def identify_setups(setups, *, fs=None, references: Sequence[str] | None = None,
         raise ValueError(f"method must be 'modular' or 'poser'; got {method!r}")
     if isinstance(setups, (str, os.PathLike)) and str(setups).lower().endswith(".toml"):
         setups = load_campaign(setups)
-    base = settings
-    if isinstance(setups, Campaign):
-        try:  # the file's [settings], checked where they are used; the message names the file
-            base = make_settings(settings, dict(setups.settings), function="identify_setups")
-        except (TypeError, ValueError) as exc:
-            raise ValueError(f"{setups.source or 'campaign'}: [settings]: {exc}") from None
+    base = campaign_settings(setups, settings) if isinstance(setups, Campaign) else settings
     s = make_settings(base, keywords, function="identify_setups")
     if s.references is not None:
         raise TypeError("identify_setups takes the references by name (references=[...]), not as Settings.references")
@@ -362,6 +357,15 @@ def identify_setups(setups, *, fs=None, references: Sequence[str] | None = None,
     single = dict(record, setups=None)
     check_references_after_modular(core_setups, o, single, names_per_setup, n_inputs_per_setup, refs)
     return result
+
+
+def campaign_settings(campaign: Campaign, settings: Settings | None = None) -> Settings:
+    """``settings`` (default ones when None) with the campaign file's ``[settings]`` applied,
+    checked here so that a bad entry is a ValueError naming the file and the table."""
+    try:
+        return make_settings(settings, dict(campaign.settings), function="identify_setups")
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{campaign.source or 'campaign'}: [settings]: {exc}") from None
 
 
 def _campaign_records(setups, fs, references, inputs) -> tuple:
