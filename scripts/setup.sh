@@ -20,7 +20,8 @@ if [[ "${1:-}" == "--test" ]]; then
   extras="all"
   # chromium: the HTML report's browser test (tests/python/test_htmlreport.py; Debian's package, headless);
   # fonts-dejavu-core: text in its screenshots
-  apt_pkgs+=(doctest-dev chromium fonts-dejavu-core)
+  # clang, libclang-rt-dev: the sanitizer build of the C++ tests (tests/run.sh; about 2x faster to compile than GCC)
+  apt_pkgs+=(doctest-dev chromium fonts-dejavu-core clang libclang-rt-dev)
 fi
 
 missing=()

@@ -5,6 +5,9 @@
 #include <limits>
 #include <string>
 
+// One namespace per test file: the unity build (tests/cpp/CMakeLists.txt) compiles several files as one.
+namespace test_covariance {
+
 using namespace support;
 using modaluq::CovarianceAccumulator;
 using modaluq::HankelLayout;
@@ -432,3 +435,5 @@ TEST_CASE("a sample whose products would overflow is refused at push, and the ac
     CHECK_THROWS_WITH_AS(modaluq::compute_covariances(big, MatrixXd(), layout(3, 0, 4, 4), 5),
                          doctest::Contains("y: sample 2500, channel 2 is 2e+60"), modaluq::invalid_argument);
 }
+
+}  // namespace test_covariance

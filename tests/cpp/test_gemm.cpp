@@ -7,6 +7,9 @@
 
 #include <limits>
 
+// One namespace per test file: the unity build (tests/cpp/CMakeLists.txt) compiles several files as one.
+namespace test_gemm {
+
 using Eigen::MatrixXcd;
 using Eigen::MatrixXd;
 using modaluq::detail::gemm;
@@ -68,3 +71,5 @@ TEST_CASE("complex gemm transposes without conjugating") {
     const MatrixXcd expect = std::complex<double>(0.5, -1.0) * a * b.transpose() + c0;
     CHECK((c - expect).cwiseAbs().maxCoeff() < 1e-13);
 }
+
+}  // namespace test_gemm

@@ -2,6 +2,9 @@
 
 #include "support/support.hpp"
 
+// One namespace per test file: the unity build (tests/cpp/CMakeLists.txt) compiles several files as one.
+namespace test_identify {
+
 using namespace support;
 
 
@@ -209,3 +212,5 @@ TEST_CASE("each mode's f-xi correlation comes from its covariance") {
     CHECK(plain.frequency_damping_correlation.size() == plain.size());
     CHECK(plain.frequency_damping_correlation.array().isNaN().all());
 }
+
+}  // namespace test_identify

@@ -11,6 +11,9 @@
 #include <complex>
 #include <random>
 
+// One namespace per test file: the unity build (tests/cpp/CMakeLists.txt) compiles several files as one.
+namespace test_indicators {
+
 namespace {
 
 using modaluq::Index;
@@ -190,3 +193,5 @@ TEST_CASE("indicators refuse what is not a shape or its covariance") {
     CHECK_THROWS_AS(modaluq::modal_assurance(phi, Eigen::VectorXcd::Ones(2)), modaluq::invalid_argument);
     CHECK_THROWS_AS(modaluq::mean_phase_deviation(phi, Eigen::MatrixXd::Identity(4, 4)), modaluq::invalid_argument);
 }
+
+}  // namespace test_indicators

@@ -5,6 +5,9 @@
 
 #include <stdexcept>
 
+// One namespace per test file: the unity build (tests/cpp/CMakeLists.txt) compiles several files as one.
+namespace test_layout {
+
 TEST_CASE("layout sizes follow from the horizons and channels") {
     modaluq::HankelLayout L;
     L.n_outputs = 3;
@@ -39,3 +42,5 @@ TEST_CASE("layout errors name the field") {
     L.references = {5};
     CHECK_THROWS_WITH_AS(L.validate(), "references: index 5 is out of range for 2 outputs", std::invalid_argument);
 }
+
+}  // namespace test_layout

@@ -7,6 +7,9 @@
 #include <cmath>
 #include <complex>
 
+// One namespace per test file: the unity build (tests/cpp/CMakeLists.txt) compiles several files as one.
+namespace test_modal {
+
 namespace {
 
 // A real 2 x 2 block with eigenvalues exp(mu dt), mu = -xi w + i w sqrt(1 - xi^2), w = 2 pi f.
@@ -59,3 +62,5 @@ TEST_CASE("a real eigenvalue is no mode, and a non-finite A is a numerical error
     ss.A(0, 1) = std::nan("");
     CHECK_THROWS_AS(modaluq::modes_from_system(ss, 40.0), modaluq::numerical_error);
 }
+
+}  // namespace test_modal

@@ -7,6 +7,9 @@
 #include "support/multisetup_case.hpp"
 #include "support/support.hpp"
 
+// One namespace per test file: the unity build (tests/cpp/CMakeLists.txt) compiles several files as one.
+namespace test_multisetup {
+
 using namespace support;
 namespace mc = multisetup_case;
 
@@ -200,3 +203,5 @@ TEST_CASE("campaigns that cannot be merged are refused with the reason") {
         CHECK_THROWS_AS(modaluq::identify_setups(c.setups, c.options), invalid_argument);
     }
 }
+
+}  // namespace test_multisetup

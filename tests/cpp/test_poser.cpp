@@ -13,6 +13,9 @@
 #include <random>
 #include <vector>
 
+// One namespace per test file: the unity build (tests/cpp/CMakeLists.txt) compiles several files as one.
+namespace test_poser {
+
 namespace {
 
 using Eigen::Index;
@@ -426,3 +429,5 @@ TEST_CASE("poser: without uncertainty, point estimates with equal weights") {
     CHECK(std::isnan(r.reference_chi2(1, 0)));
     CHECK(r.n_reference_tests == 0);
 }
+
+}  // namespace test_poser

@@ -4,6 +4,9 @@
 
 #include "support/uncertainty_cases.hpp"
 
+// One namespace per test file: the unity build (tests/cpp/CMakeLists.txt) compiles several files as one.
+namespace test_realization {
+
 using namespace support;
 
 TEST_CASE("stage dA, dC: explicit J_{A,Gamma} (with the residual term) equals finite differences") {
@@ -33,3 +36,4 @@ TEST_CASE("stage dA, dC: explicit J_{A,Gamma} (with the residual term) equals fi
     CHECK(rel(re.system(n).A, G.topRows(G.rows() - l).colPivHouseholderQr().solve(G.bottomRows(G.rows() - l))) < 1e-10);
 }
 
+}  // namespace test_realization

@@ -9,6 +9,9 @@
 
 #include "support/support.hpp"
 
+// One namespace per test file: the unity build (tests/cpp/CMakeLists.txt) compiles several files as one.
+namespace test_reliability {
+
 using namespace support;
 
 namespace {
@@ -168,3 +171,5 @@ TEST_CASE("accumulator state grows with the number of blocks, not with the sampl
     CHECK(ratio > 9.0);
     CHECK(ratio < 11.0);
 }
+
+}  // namespace test_reliability

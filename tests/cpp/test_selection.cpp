@@ -4,6 +4,9 @@
 
 #include "support/stabilization_cases.hpp"
 
+// One namespace per test file: the unity build (tests/cpp/CMakeLists.txt) compiles several files as one.
+namespace test_selection {
+
 using namespace support;
 using modaluq::PoleStatus;
 
@@ -265,3 +268,5 @@ TEST_CASE("selection: each mode carries its representative pole's f-xi correlati
     d.poles.block_too_short.resize(3);  // neither empty nor one per pole
     CHECK_THROWS_WITH_AS(d.poles.validate(), doctest::Contains("block_too_short"), modaluq::invalid_argument);
 }
+
+}  // namespace test_selection

@@ -9,6 +9,9 @@
 
 #include "support/stabilization_cases.hpp"
 
+// One namespace per test file: the unity build (tests/cpp/CMakeLists.txt) compiles several files as one.
+namespace test_stabilization {
+
 using namespace support;
 using modaluq::PoleStatus;
 
@@ -155,3 +158,4 @@ TEST_CASE("stabilization and selection end to end find the simulated modes") {
     }
 }
 
+}  // namespace test_stabilization

@@ -3,6 +3,9 @@
 
 #include "support/uncertainty_cases.hpp"
 
+// One namespace per test file: the unity build (tests/cpp/CMakeLists.txt) compiles several files as one.
+namespace test_subspace {
+
 using namespace support;
 
 TEST_CASE("stage J_{H,R}: matrix-free T_H equals finite differences and the Kronecker form") {
@@ -25,3 +28,4 @@ TEST_CASE("stage J_{H,R}: matrix-free T_H equals finite differences and the Kron
     }
 }
 
+}  // namespace test_subspace

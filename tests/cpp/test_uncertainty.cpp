@@ -2,6 +2,9 @@
 
 #include "support/uncertainty_cases.hpp"
 
+// One namespace per test file: the unity build (tests/cpp/CMakeLists.txt) compiles several files as one.
+namespace test_uncertainty {
+
 using namespace support;
 
 
@@ -452,3 +455,5 @@ TEST_CASE("end to end with frozen noise: each pole equals the explicit frozen or
         CHECK(frozen > 0);
     }
 }
+
+}  // namespace test_uncertainty
