@@ -112,9 +112,10 @@ def setup_subspace(cov):
     return H, T_H
 
 
-def gamma_factor(H, T_H, n_max):
+def gamma_factor(H, T_H, n_max, frozen_from=None):
     """Γ = U_n S_n^{1/2} at n_max (2.5) and its perturbation per block, dΓ (a × n_max × n_b),
-    from the SVD-basis form (5.5)-(5.7) (unfrozen: every coupling kept)."""
+    from the SVD-basis form (5.5)-(5.7) (unfrozen: every coupling kept).  With ``frozen_from``
+    = k*, returns (Γ, dΓ, dΓ frozen): the columns j ≥ k* keep only their scale, du_j = 0 (5.13)."""
     a, b = H.shape
     U, s, Vt = oracle.svd_sorted(H)
     V = Vt.T
@@ -139,7 +140,12 @@ def gamma_factor(H, T_H, n_max):
     ds = np.einsum("jjk->jk", Ua[:n_max, :n_max, :])
     dG = (U[:, :n_max, None] * (ds / (2 * np.sqrt(s[:n_max, None])))[None]
           + np.sqrt(s[None, :n_max, None]) * du)                                           # (5.3)
-    return Gam, dG
+    if frozen_from is None:
+        return Gam, dG
+    du[:, frozen_from:, :] = 0.0                                                           # (5.13)
+    dGf = (U[:, :n_max, None] * (ds / (2 * np.sqrt(s[:n_max, None])))[None]
+           + np.sqrt(s[None, :n_max, None]) * du)
+    return Gam, dG, dGf
 
 
 # --------------------------------------------------------------------------------------
@@ -153,7 +159,8 @@ class Campaign:
     in the global reference order).  Setup 0 is the basis setup (13.2).
     """
 
-    def __init__(self, setups, p, n_max, uncertainty=True, pool_references=False):
+    def __init__(self, setups, p, n_max, uncertainty=True, pool_references=False, freeze_noise=False,
+                 noise_floor_factor=1.5):
         self.p = int(p)
         self.pool = bool(pool_references)
         self.n_max = int(n_max)
@@ -166,10 +173,20 @@ class Campaign:
                 raise ValueError(f"setup {j}: {len(refs)} references, expected {self.r}")
             l = int(st["n_channels"])
             mov = np.array([c for c in range(l) if c not in set(refs.tolist())], dtype=int)
-            Gam, dG = gamma_factor(st["H"], st.get("T_H") if uncertainty else None, self.n_max)
+            T_H = st.get("T_H") if uncertainty else None
+            # §13.4: each setup's own noise floor k*_j (5.10)-(5.12), its columns j >= k*_j frozen
+            k_star = self.n_max + 1
+            if freeze_noise and T_H is not None:
+                k_star = oracle.noise_floor(st["H"], T_H, self.n_max + 1, factor=noise_floor_factor)[0]
+            if k_star < self.n_max:
+                Gam, dG, dGf = gamma_factor(st["H"], T_H, self.n_max, frozen_from=k_star)
+            else:
+                Gam, dG = gamma_factor(st["H"], T_H, self.n_max)
+                dGf = dG
             rows_ref = (np.arange(self.p)[:, None] * l + refs[None, :]).ravel()
             rows_mov = (np.arange(self.p)[:, None] * l + mov[None, :]).ravel()
-            self.setups.append({"Gamma": Gam, "dGamma": dG, "l": l, "rows_ref": rows_ref,
+            self.setups.append({"Gamma": Gam, "dGamma": dG, "dGamma_frozen": dGf, "k_star": k_star,
+                                "l": l, "rows_ref": rows_ref,
                                 "rows_mov": rows_mov, "n_mov": len(mov)})
             self.dofs += [(j, int(c)) for c in mov]
         self.l_g = len(self.dofs)
@@ -213,9 +230,10 @@ def merge_gamma(camp, n):
     return G
 
 
-def merge_gamma_perturbation(camp, n):
+def merge_gamma_perturbation(camp, n, frozen=False):
     """dΓ_g per block column of the concatenated factor (13.5)-(13.7): a list with, per
-    setup j, the (a_g × n × n_b,j) perturbation of Γ_g caused by setup j's blocks."""
+    setup j, the (a_g × n × n_b,j) perturbation of Γ_g caused by setup j's blocks; ``frozen``:
+    from each setup's frozen dΓ (§13.4)."""
     s0 = camp.setups[0]
     B = s0["Gamma"][s0["rows_ref"], :n]
     pre = []
@@ -226,7 +244,7 @@ def merge_gamma_perturbation(camp, n):
         pre.append({"X": X, "W": W, "T": T, "E": B - X @ T, "Gm": st["Gamma"][st["rows_mov"], :n]})
     out = []
     for j, st in enumerate(camp.setups):
-        dG = st["dGamma"][:, :n, :]
+        dG = st["dGamma_frozen" if frozen else "dGamma"][:, :n, :]
         nb = dG.shape[2]
         D = np.zeros((camp.p * camp.l_A, n, nb))
         dX = dG[st["rows_ref"]]
@@ -330,7 +348,8 @@ def prepare_setups(records, p, q, n_blocks, references):
 
 
 def identify_modular(setups, *, fs, p, orders, ref_index=None, uncertainty=True,
-                     pool_references=False):
+                     pool_references=False, freeze_noise=False, noise_floor_factor=1.5,
+                     noise_coupling_limit=20.0):
     """Modular multi-setup identification at every order (13.2)-(13.7).
 
     ``setups`` as for :class:`Campaign` (e.g. from :func:`prepare_setups`).  Returns
@@ -340,9 +359,15 @@ def identify_modular(setups, *, fs, p, orders, ref_index=None, uncertainty=True,
     covariance, frequency_std, damping_std, mode_shape_std_real/imag.
 
     ``pool_references``: the normalised reference rows X_j T_j of every setup j ≥ 1 enter the
-    estimate of A as extra rows (13.11); C keeps the references once."""
+    estimate of A as extra rows (13.11); C keeps the references once.
+
+    ``freeze_noise`` (the core's default; off here, the unfrozen merge being the reference of
+    §13.7): each setup's columns from its own noise floor k*_j on are frozen (§13.4); at an
+    order n above some k*_j each mode gets the frozen factor unless its noise coupling ρ (5.14)
+    exceeds ``noise_coupling_limit`` (results then carry noise_coupling, noise_coupled)."""
     orders = [int(o) for o in np.atleast_1d(orders)]
-    camp = Campaign(setups, p, max(orders), uncertainty=uncertainty, pool_references=pool_references)
+    camp = Campaign(setups, p, max(orders), uncertainty=uncertainty, pool_references=pool_references,
+                    freeze_noise=freeze_noise, noise_floor_factor=noise_floor_factor)
     out = {}
     for n in orders:
         Gg = merge_gamma(camp, n)
@@ -350,6 +375,19 @@ def identify_modular(setups, *, fs, p, orders, ref_index=None, uncertainty=True,
             dGg = np.concatenate(merge_gamma_perturbation(camp, n), axis=2)
             A, C, dA, dC = system_perturbation(Gg, dGg, camp.l_A, camp.l_g)
             md, fac = modal_perturbation(A, C, dA, dC, fs, ref_index=ref_index)
+            rho = np.ones(len(md["frequency_hz"]))
+            if any(n > st["k_star"] for st in camp.setups):
+                dGf = np.concatenate(merge_gamma_perturbation(camp, n, frozen=True), axis=2)
+                _, _, dAf, dCf = system_perturbation(Gg, dGf, camp.l_A, camp.l_g)
+                fac_f = modal_perturbation(A, C, dAf, dCf, fs, ref_index=ref_index)[1]
+                sd_b = np.linalg.norm(fac[:, :2, :], axis=2)
+                sd_f = np.linalg.norm(fac_f[:, :2, :], axis=2)
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    ratio = np.where(sd_f > 0, sd_b / sd_f, np.where(sd_b > 0, np.inf, 1.0))
+                rho = np.maximum(1.0, ratio.max(axis=1)) if len(rho) else rho
+                use = rho <= noise_coupling_limit
+                fac = fac.copy()
+                fac[use] = fac_f[use]
         else:
             A = oracle.system_matrices(Gg, camp.l_A)[0]
             C = Gg[:camp.l_g].copy()
@@ -358,6 +396,8 @@ def identify_modular(setups, *, fs, p, orders, ref_index=None, uncertainty=True,
                                   "ref_index")}
         if uncertainty:
             _summaries(res, fac, camp.l_g)
+            res["noise_coupling"] = rho
+            res["noise_coupled"] = ~(rho <= noise_coupling_limit)
         out[n] = res
     return out, camp
 

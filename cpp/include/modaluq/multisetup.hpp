@@ -14,11 +14,15 @@
 /// global mode is the concatenation of each setup's block columns (12.7): memory and time are
 /// linear in the number of setups.
 ///
-/// The propagation is the unfrozen first-order one (every singular direction of every setup
-/// free to rotate): it is the reference for a merge (§13.4, the noise-floor freezing of §5.5 is
-/// not validated above the true order for merged noise columns). IdentifyOptions::freeze_noise
-/// and the noise_* settings are therefore not used here; Modes::noise_coupling is 1 and
-/// Modes::singular_value_gap NaN (no single H).
+/// The noise floor of §5.5 applies setup by setup (§13.4): each setup's k*_j from its own T_H, and
+/// its singular directions from k*_j on held fixed (frozen). That is the exact derivative of the
+/// merge of the setups' frozen maps, so at every order where some setup has a frozen column the
+/// merge is propagated twice, frozen and unfrozen, and each pole keeps the frozen sigma unless
+/// its noise coupling rho (5.14) exceeds IdentifyOptions::noise_coupling_limit, exactly as for
+/// one record (IdentifyOptions::freeze_noise = false propagates every direction). Without the
+/// freeze, sigma above the true order is the unfrozen one: 2-5x the Monte Carlo scatter of the
+/// poles an engineer selects there (docs/multisetup.md). Modes::singular_value_gap is NaN (no
+/// single H).
 
 #include <Eigen/Core>
 #include <Eigen/Cholesky>
@@ -70,6 +74,10 @@ struct SetupsIdentification : Identification {
     std::vector<Eigen::VectorXd> setup_singular_values;  ///< per setup, the singular values of its H
     std::vector<Index> setup_n_blocks;                   ///< per setup, its blocks (factor columns)
     std::vector<double> setup_signal_to_noise;           ///< per setup, s_1 / std(s_1) (NaN without uncertainty)
+    /// per setup, its noise floor k*_j (§5.5; its directions from k*_j on are frozen); n_max + 1
+    /// when nothing is frozen (no uncertainty, freeze_noise off, or no noise below n_max + 1).
+    /// Identification::significant_singular_values is the smallest.
+    std::vector<Index> setup_significant_singular_values;
 };
 
 namespace detail {
@@ -79,9 +87,15 @@ namespace detail {
 /// (columns k n_max .. k n_max + n_max - 1 are block k's).
 struct SetupGamma {
     Index l = 0, r = 0, w = 0, nb = 0, n_max = 0;
+    Index k_star = std::numeric_limits<Index>::max();  ///< noise floor: columns j >= k_star are frozen
     std::vector<Index> moving;
     Eigen::MatrixXd x, m;    ///< p r x n_max, p w x n_max
     Eigen::MatrixXd dx, dm;  ///< p r x (n_max nb), p w x (n_max nb)
+    Eigen::MatrixXd dxf, dmf;  ///< the same with the columns j >= k_star frozen (empty if none is)
+    bool freezes() const { return k_star < n_max; }
+    /// dGamma's reference and moving rows of block k at order n, frozen or not.
+    auto dX(Index k, Index n, bool frozen) const { return (frozen && freezes() ? dxf : dx).middleCols(k * n_max, n); }
+    auto dM(Index k, Index n, bool frozen) const { return (frozen && freezes() ? dmf : dm).middleCols(k * n_max, n); }
 };
 
 /// Row i w + c of the result is row i l + rows[c] of g (block rows of l rows).
@@ -95,9 +109,11 @@ inline Eigen::MatrixXd block_rows_of(const Eigen::Ref<const Eigen::MatrixXd>& g,
 }
 
 /// dGamma = D S^{1/2} + U_n diag(d s_j / (2 sqrt s_j)), D = U Omega + dH V_n S^-1 (5.3)-(5.7),
-/// every direction free (unfrozen); d s_1 in `ds1`.
-inline Eigen::MatrixXd gamma_perturbation_unfrozen(const Realization& re, const Eigen::Ref<const Eigen::MatrixXd>& dh,
-                                                   Index n, double& ds1) {
+/// every direction free (unfrozen); d s_1 in `ds1`. With `frozen`, also the same with D's
+/// columns j >= frozen_from set to 0 (5.13): a frozen column only scales, d gamma_j = u_j d s_j / (2 sqrt s_j).
+inline Eigen::MatrixXd gamma_perturbation_setup(const Realization& re, const Eigen::Ref<const Eigen::MatrixXd>& dh,
+                                                Index n, double& ds1, Index frozen_from = 0,
+                                                Eigen::MatrixXd* frozen = nullptr) {
     const Eigen::VectorXd& s = re.singular_values();
     const SvdPerturbation sp = svd_perturbation(re.U(), re.V(), s, dh, n, n);
     ds1 = sp.Ua(0, 0);
@@ -106,7 +122,13 @@ inline Eigen::MatrixXd gamma_perturbation_unfrozen(const Realization& re, const 
     gemm(d, re.U(), Op::N, sp.omega, Op::N);
     d += sp.P.leftCols(n) * s.head(n).cwiseInverse().asDiagonal();
     const Eigen::VectorXd e = sp.Ua.diagonal().head(n).cwiseQuotient(2.0 * sq);
-    return d * sq.asDiagonal() + re.U().leftCols(n) * e.asDiagonal();
+    const Eigen::MatrixXd scale = re.U().leftCols(n) * e.asDiagonal();
+    if (frozen) {
+        const Index k = std::clamp<Index>(frozen_from, 0, n);
+        *frozen = scale;
+        frozen->leftCols(k) += d.leftCols(k) * sq.head(k).asDiagonal();
+    }
+    return d * sq.asDiagonal() + scale;
 }
 
 /// Group sums of the Q matrices of §13.3 for one group (rows p w, up = all but the last block
@@ -125,9 +147,9 @@ inline void add_group_q(const Eigen::Ref<const Eigen::MatrixXd>& g, const Eigen:
 /// Identify a campaign of setups by the modular merge (docs/uq-math.md §13.2-13.3).
 ///
 /// Uses from `options`: fs, block_rows, past_block_rows (each setup's covariances must have
-/// them), orders, uncertainty, input_rcond, threads. The references, blocks and demeaning are
-/// each setup's (in its covariances); freeze_noise and the noise_* settings are not used (the
-/// propagation is unfrozen, see the file comment).
+/// them), orders, uncertainty, input_rcond, threads, freeze_noise, noise_floor_factor and
+/// noise_coupling_limit (per setup, see the file comment). The references, blocks and demeaning
+/// are each setup's (in its covariances).
 ///
 /// Throws invalid_argument for: no setups; a setup whose number of references differs from
 /// setup 0's, whose references are out of range, repeated, or not its covariances' past
@@ -236,14 +258,26 @@ inline SetupsIdentification identify_setups(const std::vector<SetupData>& setups
             const Eigen::MatrixXd t_h = propagate_to_subspace(sub, cov, cov.covariance_factor());
             const Index a = L.rows_future(), b = L.rows_past(), nm = g.n_max;
             g.nb = t_h.cols();
+            if (options.freeze_noise)  // this setup's own noise floor (§5.5, §13.4)
+                g.k_star = detail::noise_floor(re, t_h, b, options.noise_floor_factor, nm + 1, options.threads).k;
             g.dx.resize(p * r, nm * g.nb);
             g.dm.resize(p * g.w, nm * g.nb);
+            if (g.freezes()) {
+                g.dxf.resize(p * r, nm * g.nb);
+                g.dmf.resize(p * g.w, nm * g.nb);
+            }
             Eigen::VectorXd ds1(g.nb);
             detail::parallel_for(g.nb, options.threads, [&](Index k) {
                 Eigen::Map<const Eigen::MatrixXd> dh(t_h.col(k).data(), a, b);
-                const Eigen::MatrixXd dg = detail::gamma_perturbation_unfrozen(re, dh, nm, ds1(k));
+                Eigen::MatrixXd dgf;
+                const Eigen::MatrixXd dg = detail::gamma_perturbation_setup(re, dh, nm, ds1(k), g.k_star,
+                                                                            g.freezes() ? &dgf : nullptr);
                 g.dx.middleCols(k * nm, nm) = detail::block_rows_of(dg, g.l, s.references);
                 g.dm.middleCols(k * nm, nm) = detail::block_rows_of(dg, g.l, g.moving);
+                if (g.freezes()) {
+                    g.dxf.middleCols(k * nm, nm) = detail::block_rows_of(dgf, g.l, s.references);
+                    g.dmf.middleCols(k * nm, nm) = detail::block_rows_of(dgf, g.l, g.moving);
+                }
             });
             snr = re.singular_values()(0) / ds1.norm();
             out.n_blocks += g.nb;
@@ -251,6 +285,7 @@ inline SetupsIdentification identify_setups(const std::vector<SetupData>& setups
         }
         out.setup_signal_to_noise.push_back(snr);
         out.setup_n_blocks.push_back(g.nb);
+        out.setup_significant_singular_values.push_back(std::min(g.k_star, n_max + 1));
         if (unc) out.signal_to_noise = std::min(out.signal_to_noise, snr);
     }
     // Global DOFs: references first (setup 0's channels), then the moving ones gathered above.
@@ -262,6 +297,8 @@ inline SetupsIdentification identify_setups(const std::vector<SetupData>& setups
         out.dof_channel = std::move(dc);
     }
     if (!unc) out.signal_to_noise = std::numeric_limits<double>::quiet_NaN();
+    out.significant_singular_values =
+        *std::min_element(out.setup_significant_singular_values.begin(), out.setup_significant_singular_values.end());
     const double block_seconds = unc ? static_cast<double>(min_block) / options.fs : 0.0;
     out.block_length = unc ? min_block : 0;
     if (unc) {
@@ -358,42 +395,79 @@ inline SetupsIdentification identify_setups(const std::vector<SetupData>& setups
                     gemm(k2, G[j].bottomRows(rw), Op::T, P[j].topRows(rw), Op::N, 1.0, 1.0);
                     gemm(k3, G[j].topRows(rw), Op::T, P[j].bottomRows(rw), Op::N, 1.0, 1.0);
                 }
-                detail::BlockQ bq(nb_total, n, l_g);
-                for (Index j = 0; j < ns; ++j) {
-                    const detail::SetupGamma& g = sg[j];
-                    detail::parallel_for(g.nb, options.threads, [&](Index k) {
-                        const auto dX = g.dx.middleCols(k * g.n_max, n);
-                        const auto dM = g.dm.middleCols(k * g.n_max, n);
-                        Eigen::MatrixXd q1 = Eigen::MatrixXd::Zero(n, n), q2 = q1, q3 = q1;
-                        Eigen::MatrixXd q4 = Eigen::MatrixXd::Zero(l_g, n);
-                        if (j == 0) {  // (12.6)
-                            detail::add_group_q(B, dX, r, q1, q2, q3);
-                            detail::add_group_q(G[0], dM, g.w, q1, q2, q3);
-                            // (P_j dX)_up = P_j,up dX: the row selection falls on P_j
-                            q1.noalias() += k1 * dX;
-                            q2.noalias() += k2 * dX;
-                            q3.noalias() += k3 * dX;
-                            q4.topRows(r) = dX.topRows(r);
-                            q4.middleRows(c0[0], g.w) = dM.topRows(g.w);
-                            for (Index i = 1; i < ns; ++i)
-                                if (sg[i].w > 0) q4.middleRows(c0[i], sg[i].w).noalias() = P[i].topRows(sg[i].w) * dX;
-                        } else {  // (12.5): dT = -X^+ dX T + W dX^T E; dG = dM T + M dT
-                            Eigen::MatrixXd dT = -(Xp[j] * dX) * T[j];
-                            dT.noalias() += Wj[j] * (dX.transpose() * E[j]);
-                            Eigen::MatrixXd dG = dM * T[j];
-                            dG.noalias() += sg[j].m.leftCols(n) * dT;
-                            detail::add_group_q(G[j], dG, g.w, q1, q2, q3);
-                            q4.middleRows(c0[j], g.w) = dG.topRows(g.w);
-                        }
-                        bq.set(col0[j] + k, q3 + q2.transpose(), q1 + q1.transpose(), q4);
-                    });
-                }
-                // Stages 4-5 (§9) unchanged on Gamma_g, all blocks of all setups at once.
+                // The Q matrices of every block of every setup, with each setup's noise columns
+                // frozen or not (§13.4).
+                const auto block_q = [&](bool frozen) {
+                    detail::BlockQ bq(nb_total, n, l_g);
+                    for (Index j = 0; j < ns; ++j) {
+                        const detail::SetupGamma& g = sg[j];
+                        detail::parallel_for(g.nb, options.threads, [&](Index k) {
+                            const auto dX = g.dX(k, n, frozen);
+                            const auto dM = g.dM(k, n, frozen);
+                            Eigen::MatrixXd q1 = Eigen::MatrixXd::Zero(n, n), q2 = q1, q3 = q1;
+                            Eigen::MatrixXd q4 = Eigen::MatrixXd::Zero(l_g, n);
+                            if (j == 0) {  // (12.6)
+                                detail::add_group_q(B, dX, r, q1, q2, q3);
+                                detail::add_group_q(G[0], dM, g.w, q1, q2, q3);
+                                // (P_j dX)_up = P_j,up dX: the row selection falls on P_j
+                                q1.noalias() += k1 * dX;
+                                q2.noalias() += k2 * dX;
+                                q3.noalias() += k3 * dX;
+                                q4.topRows(r) = dX.topRows(r);
+                                q4.middleRows(c0[0], g.w) = dM.topRows(g.w);
+                                for (Index i = 1; i < ns; ++i)
+                                    if (sg[i].w > 0) q4.middleRows(c0[i], sg[i].w).noalias() = P[i].topRows(sg[i].w) * dX;
+                            } else {  // (12.5): dT = -X^+ dX T + W dX^T E; dG = dM T + M dT
+                                Eigen::MatrixXd dT = -(Xp[j] * dX) * T[j];
+                                dT.noalias() += Wj[j] * (dX.transpose() * E[j]);
+                                Eigen::MatrixXd dG = dM * T[j];
+                                dG.noalias() += sg[j].m.leftCols(n) * dT;
+                                detail::add_group_q(G[j], dG, g.w, q1, q2, q3);
+                                q4.middleRows(c0[j], g.w) = dG.topRows(g.w);
+                            }
+                            bq.set(col0[j] + k, q3 + q2.transpose(), q1 + q1.transpose(), q4);
+                        });
+                    }
+                    return bq;
+                };
+                // Stages 4-5 (§9) unchanged on Gamma_g, all blocks of all setups at once; where a
+                // setup has a frozen column among the first n, frozen in full and unfrozen for rho
+                // (5.14) and the shapes of flagged poles, as UncertaintyPropagator::modes does.
                 const detail::OrderContext ctx(eig, ss, R);
+                const Index nm = modes.n_modes(), np = 2 + 2 * l_g;
+                const bool frozen = std::any_of(sg.begin(), sg.end(), [&](const detail::SetupGamma& g) {
+                    return g.freezes() && n > g.k_star;
+                });
+                modes.noise_coupling = Eigen::VectorXd::Ones(nm);
+                modes.noise_coupled = Eigen::Array<bool, Eigen::Dynamic, 1>::Constant(nm, false);
                 Eigen::MatrixXcd dlam;
                 std::vector<Eigen::MatrixXcd> dshape;
-                detail::eigen_perturbation_blocks(ctx, bq, dlam, dshape);
-                const Index nm = modes.n_modes(), np = 2 + 2 * l_g;
+                std::vector<Eigen::MatrixXd> ut_f;
+                if (frozen) {
+                    Eigen::MatrixXcd dlam_f;
+                    std::vector<Eigen::MatrixXcd> dshape_f;
+                    detail::eigen_perturbation_blocks(ctx, block_q(true), dlam_f, dshape_f);
+                    for (Index i = 0; i < nm; ++i)
+                        ut_f.push_back(detail::modal_perturbation(ctx.lambda(i), options.fs,
+                                                                  ss.C.cast<cd>() * ctx.phi.col(i),
+                                                                  modes.reference_component(i), dlam_f.row(i),
+                                                                  dshape_f[i]));
+                    detail::eigen_perturbation_blocks(ctx, block_q(false), dlam, dshape, [&](Index i) {
+                        const Eigen::MatrixXd plain =
+                            detail::frequency_damping_perturbation(ctx.lambda(i), options.fs, dlam.row(i));
+                        double rho = 1.0;
+                        for (Index row : {0, 1}) {
+                            const double pl = plain.row(row).norm(), fr = ut_f[i].row(row).norm();
+                            rho = std::max(rho, fr > 0.0 ? pl / fr
+                                                         : (pl > 0.0 ? std::numeric_limits<double>::infinity() : 1.0));
+                        }
+                        modes.noise_coupling(i) = rho;
+                        modes.noise_coupled(i) = !(rho <= options.noise_coupling_limit);
+                        return bool(modes.noise_coupled(i));
+                    });
+                } else {
+                    detail::eigen_perturbation_blocks(ctx, block_q(false), dlam, dshape);
+                }
                 modes.frequency_std.resize(nm);
                 modes.damping_std.resize(nm);
                 modes.mode_shape_std_real.resize(l_g, nm);
@@ -401,12 +475,12 @@ inline SetupsIdentification identify_setups(const std::vector<SetupData>& setups
                 modes.covariance.resize(np * np, nm);
                 modes.block_too_short.resize(nm);
                 modes.frequency_damping_correlation.resize(nm);
-                modes.noise_coupling = Eigen::VectorXd::Ones(nm);
-                modes.noise_coupled = Eigen::Array<bool, Eigen::Dynamic, 1>::Constant(nm, false);
                 for (Index i = 0; i < nm; ++i) {
-                    const Eigen::MatrixXd ut = detail::modal_perturbation(
-                        ctx.lambda(i), options.fs, ss.C.cast<cd>() * ctx.phi.col(i), modes.reference_component(i),
-                        dlam.row(i), dshape[i]);
+                    const Eigen::MatrixXd ut =
+                        (frozen && !modes.noise_coupled(i))
+                            ? ut_f[i]
+                            : detail::modal_perturbation(ctx.lambda(i), options.fs, ss.C.cast<cd>() * ctx.phi.col(i),
+                                                         modes.reference_component(i), dlam.row(i), dshape[i]);
                     const Eigen::MatrixXd cv = ut * ut.transpose();
                     modes.covariance.col(i) = Eigen::Map<const Eigen::VectorXd>(cv.data(), np * np);
                     const Eigen::VectorXd sd = cv.diagonal().cwiseMax(0.0).cwiseSqrt();

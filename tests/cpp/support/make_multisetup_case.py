@@ -20,7 +20,7 @@ from modaluq.simulate.campaign import simulate_campaign  # noqa: E402
 
 P = 7
 NB = 8
-ORDERS = (6, 12)
+ORDERS = (6, 12, 14)  # 14 > every setup's noise floor k*_j (12-13): the frozen merge of §13.4
 ROVING = (("L1", "L5"), ("L9", "R2"), ("R5", "R11"))
 DURATIONS = (20.0, 24.0, 22.0)
 
@@ -40,7 +40,7 @@ def case(io):
     c = simulate_campaign(11, durations=DURATIONS, roving=ROVING, **kw)
     recs = [(rounded(s.y), rounded(s.u) if io else None) for s in c.setups]
     setups = om.prepare_setups(recs, P, P, NB, [s.references for s in c.setups])
-    res, camp = om.identify_modular(setups, fs=c.fs, p=P, orders=ORDERS)
+    res, camp = om.identify_modular(setups, fs=c.fs, p=P, orders=ORDERS, freeze_noise=True)  # the core's default
     tag = "io" if io else "oo"
     out = [f"// ---- {tag}\n"]
     for j, (y, u) in enumerate(recs):
@@ -48,6 +48,8 @@ def case(io):
         if u is not None:
             out.append(arr(f"{tag}_u{j}", u.reshape(len(u), -1).T, "%.7g"))
         out.append(f"inline constexpr Index {tag}_n{j} = {len(y)};\n")
+    ks = ", ".join(str(st["k_star"]) for st in camp.setups)
+    out.append(f"inline const std::vector<Index> {tag}_k_star = {{{ks}}};\n")
     for n in ORDERS:
         r = res[n]
         out.append(f"inline constexpr Index {tag}_modes{n} = {len(r['frequency_hz'])};\n")
@@ -60,6 +62,7 @@ def case(io):
         out.append(arr(f"{tag}_shape_std_re{n}", r["mode_shape_std_real"]))
         out.append(arr(f"{tag}_shape_std_im{n}", r["mode_shape_std_imag"]))
         out.append(arr(f"{tag}_cov{n}", r["covariance"].reshape(len(r["frequency_hz"]), -1).T))
+        out.append(arr(f"{tag}_rho{n}", r["noise_coupling"]))
     return "".join(out), c.fs, camp.l_g
 
 
