@@ -33,7 +33,8 @@ void modaluq::python::bind_multisetup(py::module_& m) {
         .def_readonly("dof_channel", &SetupsIdentification::dof_channel)
         .def_readonly("setup_singular_values", &SetupsIdentification::setup_singular_values)
         .def_readonly("setup_n_blocks", &SetupsIdentification::setup_n_blocks)
-        .def_readonly("setup_signal_to_noise", &SetupsIdentification::setup_signal_to_noise);
+        .def_readonly("setup_signal_to_noise", &SetupsIdentification::setup_signal_to_noise)
+        .def_readonly("setup_significant_singular_values", &SetupsIdentification::setup_significant_singular_values);
 
     m.def("identify_setups", &identify_setups, py::arg("setups"), py::arg("options"),
           py::call_guard<py::gil_scoped_release>());

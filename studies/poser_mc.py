@@ -15,9 +15,11 @@ rejected (it must stay silent), and per mode the modular/PoSER ratio of σ_f and
 With ``diagram``: the public API instead, as an engineer would run it: identify_setups with
 block_rows=20, orders 2..40, the default n_blocks, then select_modes(), for both methods (PoSER:
 each setup's own diagram and selection, its σ frozen at its own noise floor; modular: the merged
-diagram, its σ unfrozen, docs/uq-math.md §13.4); f and σ_f of each selected mode.
+diagram, each setup's noise floor frozen, docs/uq-math.md §13.4, or not with ``unfrozen``); f, ξ
+and their σ of each selected mode: median σ over the MC std, and the coverage of ±1.96 σ around
+the true value.
 
-Usage: OPENBLAS_NUM_THREADS=1 python studies/poser_mc.py [N] [diagram] [output-only|input/output ...]
+Usage: OPENBLAS_NUM_THREADS=1 python studies/poser_mc.py [N] [diagram [unfrozen]] [output-only|input/output ...]
 """
 import sys
 import time
@@ -150,8 +152,10 @@ def report(name, runs, truth_f, kref):
           f"largest chi2 per campaign: median {np.median(chi):.1f}, max {chi.max():.1f}")
 
 
-def run_diagram(seed, kw, io):
-    """f and σ_f of the selected modes nearest each true mode, both methods, public API."""
+def run_diagram(seed, kw, io, freeze_noise=True):
+    """f, σ_f, ξ, σ_ξ of the selected modes nearest each true mode, both methods, public API;
+    under "shape" the shape normalised at the true shape's largest component and the σ of its
+    real and imaginary parts (the covariance renormalised there, as ``_theta``)."""
     c = simulate_campaign(seed, **kw)
     frames = c.frames(input_names=["F5"] if io else ())
     out = {}
@@ -159,46 +163,75 @@ def run_diagram(seed, kw, io):
         warnings.simplefilter("ignore")
         for m in METHODS:
             r = modaluq.identify_setups(frames, fs=c.fs, references=["L3", "R8"], inputs=["F5"] if io else None,
-                                        block_rows=20, orders=range(2, 41, 2), method=m)
+                                        block_rows=20, orders=range(2, 41, 2), method=m, freeze_noise=freeze_noise)
             sel = r.select_modes()
-            f = np.full((len(c.frequency_hz), 2), np.nan)
+            names = list(sel.output_names)
+            Phi = c.mode_shape[[c.dofs.index(n) for n in names]]
+            kref = np.argmax(np.abs(Phi), axis=0)
+            nm, l = len(c.frequency_hz), len(names)
+            f = np.full((nm, 4), np.nan)
+            shape = np.full((nm, 3, l), np.nan + 0j)  # shape, σ Re, σ Im
             for t, f0 in enumerate(c.frequency_hz):
                 i = np.flatnonzero(np.abs(sel.frequency_hz / f0 - 1) < 0.05)
                 if i.size == 1:
-                    f[t] = sel.frequency_hz[i[0]], sel.frequency_std[i[0]]
+                    k = i[0]
+                    f[t] = sel.frequency_hz[k], sel.frequency_std[k], sel.damping_ratio[k], sel.damping_std[k]
+                    th = _theta(f[t, 0], f[t, 1], f[t, 2], f[t, 3], sel.mode_shape[:, k],
+                                sel.mode_covariance[k].ravel(order="F"), kref[t], l)
+                    shape[t] = th[4], th[5], th[6]
             out[m] = f
+            out[m + " shape"] = shape
+            out["kref"] = kref
     return out
 
 
-def main_diagram(n, configs=None):
+def main_diagram(n, configs=None, freeze_noise=True):
     results = {}
     for name, kw in CONFIGS.items():
         if configs and name not in configs:
             continue
         t0 = time.process_time()
-        runs = results[name] = [run_diagram(30_000 + s, kw, bool(kw)) for s in range(n)]
-        truth = simulate_campaign(0, durations=(10.0,) * 6).frequency_hz
-        print(f"\n### {name}, diagram (orders 2..40, block_rows 20, default n_blocks): {n} campaigns\n")
-        print("| mode | f (Hz) | found modular / PoSER | σ_f/MC modular | σ_f/MC PoSER | median σ_f modular/PoSER "
-              "| MC std f modular/PoSER |")
-        print("|---|---|---|---|---|---|---|")
-        for t, f0 in enumerate(truth):
+        runs = []
+        for s in range(n):
+            runs.append(run_diagram(30_000 + s, kw, bool(kw), freeze_noise))
+            if (s + 1) % 10 == 0:
+                print(f"  {name}: {s + 1}/{n} campaigns, {time.process_time() - t0:.0f} CPU s", file=sys.stderr, flush=True)
+        results[name] = runs
+        truth = simulate_campaign(0, durations=(10.0,) * 6)
+        print(f"\n### {name}, diagram (orders 2..40, block_rows 20, default n_blocks, "
+              f"{'frozen' if freeze_noise else 'unfrozen'} merge): {n} campaigns\n")
+        print("| mode | f (Hz) | found modular / PoSER | σ_f/MC modular | σ_f/MC PoSER | σ_ξ/MC modular | σ_ξ/MC PoSER "
+              "| coverage f modular / PoSER | coverage ξ modular / PoSER | shape σ/MC modular, median [min, max] "
+              "| shape σ/MC PoSER | median σ_f modular/PoSER | MC std f modular/PoSER |")
+        print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+        for t, (f0, x0) in enumerate(zip(truth.frequency_hz, truth.damping_ratio)):
             row = {}
             for m in METHODS:
                 F = np.array([r[m][t] for r in runs])
-                ok = np.isfinite(F[:, 0])
-                row[m] = (ok.sum(), np.std(F[ok, 0], ddof=1), np.median(F[ok, 1]))
+                F = F[np.isfinite(F[:, 0])]
+                sf, sx = np.std(F[:, 0], ddof=1), np.std(F[:, 2], ddof=1)
+                cov_f = np.mean(np.abs(F[:, 0] - f0) <= 1.96 * F[:, 1])
+                cov_x = np.mean(np.abs(F[:, 2] - x0) <= 1.96 * F[:, 3])
+                S = np.array([r[m + " shape"][t] for r in runs])
+                S = S[np.isfinite(S[:, 0, 0])]
+                ratios = [np.median(S[:, 1 + part, c].real) / np.std(getattr(S[:, 0, c], name), ddof=1)
+                          for c in range(S.shape[2]) if c != runs[0]["kref"][t]
+                          for part, name in ((0, "real"), (1, "imag"))]
+                row[m] = (len(F), sf, np.median(F[:, 1]) / sf, np.median(F[:, 3]) / sx, cov_f, cov_x,
+                          np.median(ratios), np.min(ratios), np.max(ratios))
             a = np.array([r["modular"][t, 1] / r["poser"][t, 1] for r in runs])
-            print(f"| {t + 1} | {f0:.2f} | {row['modular'][0]} / {row['poser'][0]} | "
-                  f"{row['modular'][2] / row['modular'][1]:.2f} | {row['poser'][2] / row['poser'][1]:.2f} | "
-                  f"{np.nanmedian(a):.2f} | {row['modular'][1] / row['poser'][1]:.2f} |")
+            M, Q = row["modular"], row["poser"]
+            print(f"| {t + 1} | {f0:.2f} | {M[0]} / {Q[0]} | {M[2]:.2f} | {Q[2]:.2f} | {M[3]:.2f} | {Q[3]:.2f} | "
+                  f"{100 * M[4]:.0f} / {100 * Q[4]:.0f} % | {100 * M[5]:.0f} / {100 * Q[5]:.0f} % | "
+                  f"{M[6]:.2f} [{M[7]:.2f}, {M[8]:.2f}] | {Q[6]:.2f} [{Q[7]:.2f}, {Q[8]:.2f}] | "
+                  f"{np.nanmedian(a):.2f} | {M[1] / Q[1]:.2f} |")
         print(f"CPU time {time.process_time() - t0:.0f} s")
     return results
 
 
 def main(n=100, configs=None):
     if configs and "diagram" in configs:
-        return main_diagram(n, [c for c in configs if c != "diagram"])
+        return main_diagram(n, [c for c in configs if c not in ("diagram", "unfrozen")], "unfrozen" not in configs)
     results = {}
     for name, kw in CONFIGS.items():
         if configs and name not in configs:

@@ -1051,6 +1051,9 @@ class SetupsIdentification(Identification):
     def setup_signal_to_noise(self) -> list[float]:
         ...
     @property
+    def setup_significant_singular_values(self) -> list[int]:
+        ...
+    @property
     def setup_singular_values(self) -> list[typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 1]"]]:
         ...
 class PoserSetupModes:

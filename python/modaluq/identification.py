@@ -253,7 +253,8 @@ def identify_setups(setups, *, fs=None, references: Sequence[str] | None = None,
     ξ and the global shape. The result is a :class:`Result` like :func:`identify`'s: its
     stabilization diagram and ``select_modes()`` work unchanged, with ``output_names`` the
     global DOFs (the references once, then each setup's other channels in setup and column
-    order). The propagation is the unfrozen first-order one (``freeze_noise`` is not used).
+    order). Each setup's noise floor is frozen as for one record (``freeze_noise``, docs/uq-math.md
+    §13.4), so σ above the true order is not inflated by the setups' noise directions.
 
     Parameters
     ----------

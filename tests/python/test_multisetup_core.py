@@ -1,7 +1,8 @@
 """The C++ multi-setup merge (cpp/include/modaluq/multisetup.hpp, ``_core.identify_setups``)
 equals the NumPy reference ``oracle_multisetup.identify_modular`` (docs/uq-math.md §13) on the
 simulated deck campaign: f, ξ, the global shapes, their σ and covariance, output-only and
-input/output, at every order of a small diagram."""
+input/output, at every order of a small diagram, with each setup's noise columns frozen (the
+default, §13.4) and without."""
 
 import os
 import sys
@@ -45,7 +46,7 @@ def _core_setups(camp, io):
     return out
 
 
-def _options(fs, uncertainty=True):
+def _options(fs, uncertainty=True, freeze_noise=True):
     o = _core.IdentifyOptions()
     o.fs = fs
     o.block_rows = P
@@ -53,6 +54,7 @@ def _options(fs, uncertainty=True):
     o.orders = ORDERS
     o.n_blocks = NB
     o.uncertainty = uncertainty
+    o.freeze_noise = freeze_noise
     return o
 
 
@@ -64,15 +66,20 @@ def _rel_cols(a, b):
     return float(np.max(num / den)) if a.size else 0.0
 
 
-@pytest.fixture(scope="module", params=["oo", "io"])
+@pytest.fixture(scope="module", params=["oo", "io", "oo-unfrozen", "io-unfrozen"])
 def case(request):
-    io = request.param == "io"
+    io = request.param.startswith("io")
+    freeze = not request.param.endswith("unfrozen")
     camp = _campaign(io)
-    ident = _core.identify_setups(_core_setups(camp, io), _options(camp.fs))
+    ident = _core.identify_setups(_core_setups(camp, io), _options(camp.fs, freeze_noise=freeze))
     ref, rcamp = om.identify_modular(
         om.prepare_setups([(s.y, s.u if io else None) for s in camp.setups], P, P, NB,
                           [s.references for s in camp.setups]),
-        fs=camp.fs, p=P, orders=ORDERS)
+        fs=camp.fs, p=P, orders=ORDERS, freeze_noise=freeze)
+    k_star = [st["k_star"] for st in rcamp.setups]
+    assert list(ident.setup_significant_singular_values) == k_star
+    if freeze:  # the frozen path is exercised: some setup's floor lies below the highest order
+        assert min(k_star) < max(ORDERS), k_star
     return camp, ident, ref, rcamp
 
 
@@ -95,7 +102,8 @@ def test_core_merge_equals_the_numpy_reference(case):
                     _rel_cols(m.damping_std[None], r["damping_std"][None]),
                     _rel_cols(m.mode_shape_std_real, r["mode_shape_std_real"]),
                     _rel_cols(m.mode_shape_std_imag, r["mode_shape_std_imag"]),
-                    _rel_cols(m.covariance, cov_ref))
+                    _rel_cols(m.covariance, cov_ref),
+                    _rel_cols(m.noise_coupling[None], r["noise_coupling"][None]))
         assert point < TOL, (n, point)
         assert sigma < (TOL if n <= TRUE_ORDER else TOL_ABOVE_TRUE_ORDER), (n, sigma)
         key = "up to the true order" if n <= TRUE_ORDER else "above"

@@ -105,9 +105,11 @@ def test_poser_mc(capsys):
     out = _module("poser_mc").main(n=3, configs=["output-only"])
     assert set(out) == {"output-only"} and len(out["output-only"]) == 3
     out = _module("poser_mc").main(n=2, configs=["diagram", "input/output"])
-    assert set(out) == {"input/output"} and out["input/output"][0]["poser"].shape == (6, 2)
+    assert set(out) == {"input/output"} and out["input/output"][0]["poser"].shape == (6, 4)  # f, σ_f, ξ, σ_ξ
+    assert out["input/output"][0]["modular shape"].shape[:2] == (6, 3)  # shape, σ Re, σ Im per true mode
     text = capsys.readouterr().out
     assert "| mode | f (Hz) | method |" in text and "MC std f modular/PoSER" in text
+    assert "frozen merge" in text and "coverage f modular / PoSER" in text
 
 
 def test_settings_records_without_data(capsys, tmp_path):
