@@ -19,7 +19,10 @@ diagram, each setup's noise floor frozen, docs/uq-math.md §13.4, or not with ``
 and their σ of each selected mode: median σ over the MC std, and the coverage of ±1.96 σ around
 the true value.
 
-Usage: OPENBLAS_NUM_THREADS=1 python studies/poser_mc.py [N] [diagram [unfrozen]] [output-only|input/output ...]
+With ``diagram auto``: the engineer's call of issue 23, ``frequency_range=(0.5, 11)`` only (the
+automatic block_rows, orders and n_blocks), the modular merge only.
+
+Usage: OPENBLAS_NUM_THREADS=1 python studies/poser_mc.py [N] [diagram [unfrozen] [auto]] [output-only|input/output ...]
 """
 import sys
 import time
@@ -152,7 +155,11 @@ def report(name, runs, truth_f, kref):
           f"largest chi2 per campaign: median {np.median(chi):.1f}, max {chi.max():.1f}")
 
 
-def run_diagram(seed, kw, io, freeze_noise=True):
+AUTO = {"frequency_range": (0.5, 11.0)}
+DIAGRAM = {"block_rows": 20, "orders": range(2, 41, 2)}
+
+
+def run_diagram(seed, kw, io, freeze_noise=True, auto=False):
     """f, σ_f, ξ, σ_ξ of the selected modes nearest each true mode, both methods, public API;
     under "shape" the shape normalised at the true shape's largest component and the σ of its
     real and imaginary parts (the covariance renormalised there, as ``_theta``)."""
@@ -161,9 +168,9 @@ def run_diagram(seed, kw, io, freeze_noise=True):
     out = {}
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        for m in METHODS:
+        for m in METHODS[:1] if auto else METHODS:
             r = modaluq.identify_setups(frames, fs=c.fs, references=["L3", "R8"], inputs=["F5"] if io else None,
-                                        block_rows=20, orders=range(2, 41, 2), method=m, freeze_noise=freeze_noise)
+                                        method=m, freeze_noise=freeze_noise, **(AUTO if auto else DIAGRAM))
             sel = r.select_modes()
             names = list(sel.output_names)
             Phi = c.mode_shape[[c.dofs.index(n) for n in names]]
@@ -185,7 +192,7 @@ def run_diagram(seed, kw, io, freeze_noise=True):
     return out
 
 
-def main_diagram(n, configs=None, freeze_noise=True):
+def main_diagram(n, configs=None, freeze_noise=True, auto=False):
     results = {}
     for name, kw in CONFIGS.items():
         if configs and name not in configs:
@@ -193,13 +200,13 @@ def main_diagram(n, configs=None, freeze_noise=True):
         t0 = time.process_time()
         runs = []
         for s in range(n):
-            runs.append(run_diagram(30_000 + s, kw, bool(kw), freeze_noise))
+            runs.append(run_diagram(30_000 + s, kw, bool(kw), freeze_noise, auto))
             if (s + 1) % 10 == 0:
                 print(f"  {name}: {s + 1}/{n} campaigns, {time.process_time() - t0:.0f} CPU s", file=sys.stderr, flush=True)
         results[name] = runs
         truth = simulate_campaign(0, durations=(10.0,) * 6)
-        print(f"\n### {name}, diagram (orders 2..40, block_rows 20, default n_blocks, "
-              f"{'frozen' if freeze_noise else 'unfrozen'} merge): {n} campaigns\n")
+        how = "frequency_range (0.5, 11) Hz only" if auto else "orders 2..40, block_rows 20, default n_blocks"
+        print(f"\n### {name}, diagram ({how}, {'frozen' if freeze_noise else 'unfrozen'} merge): {n} campaigns\n")
         print("| mode | f (Hz) | found modular / PoSER | σ_f/MC modular | σ_f/MC PoSER | σ_ξ/MC modular | σ_ξ/MC PoSER "
               "| coverage f modular / PoSER | coverage ξ modular / PoSER | shape σ/MC modular, median [min, max] "
               "| shape σ/MC PoSER | median σ_f modular/PoSER | MC std f modular/PoSER |")
@@ -207,6 +214,9 @@ def main_diagram(n, configs=None, freeze_noise=True):
         for t, (f0, x0) in enumerate(zip(truth.frequency_hz, truth.damping_ratio)):
             row = {}
             for m in METHODS:
+                if m not in runs[0]:  # auto: the modular merge only
+                    row[m] = (0,) + (np.nan,) * 8
+                    continue
                 F = np.array([r[m][t] for r in runs])
                 F = F[np.isfinite(F[:, 0])]
                 sf, sx = np.std(F[:, 0], ddof=1), np.std(F[:, 2], ddof=1)
@@ -219,19 +229,20 @@ def main_diagram(n, configs=None, freeze_noise=True):
                           for part, name in ((0, "real"), (1, "imag"))]
                 row[m] = (len(F), sf, np.median(F[:, 1]) / sf, np.median(F[:, 3]) / sx, cov_f, cov_x,
                           np.median(ratios), np.min(ratios), np.max(ratios))
-            a = np.array([r["modular"][t, 1] / r["poser"][t, 1] for r in runs])
+            a = np.array([r["modular"][t, 1] / r["poser"][t, 1] if "poser" in r else np.nan for r in runs])
             M, Q = row["modular"], row["poser"]
             print(f"| {t + 1} | {f0:.2f} | {M[0]} / {Q[0]} | {M[2]:.2f} | {Q[2]:.2f} | {M[3]:.2f} | {Q[3]:.2f} | "
                   f"{100 * M[4]:.0f} / {100 * Q[4]:.0f} % | {100 * M[5]:.0f} / {100 * Q[5]:.0f} % | "
                   f"{M[6]:.2f} [{M[7]:.2f}, {M[8]:.2f}] | {Q[6]:.2f} [{Q[7]:.2f}, {Q[8]:.2f}] | "
-                  f"{np.nanmedian(a):.2f} | {M[1] / Q[1]:.2f} |")
+                  f"{np.nanmedian(a) if np.isfinite(a).any() else np.nan:.2f} | {M[1] / Q[1]:.2f} |")
         print(f"CPU time {time.process_time() - t0:.0f} s")
     return results
 
 
 def main(n=100, configs=None):
     if configs and "diagram" in configs:
-        return main_diagram(n, [c for c in configs if c not in ("diagram", "unfrozen")], "unfrozen" not in configs)
+        return main_diagram(n, [c for c in configs if c not in ("diagram", "unfrozen", "auto")], "unfrozen" not in configs,
+                            "auto" in configs)
     results = {}
     for name, kw in CONFIGS.items():
         if configs and name not in configs:
