@@ -453,14 +453,8 @@ inline SetupsIdentification identify_setups(const std::vector<SetupData>& setups
                                                                   modes.reference_component(i), dlam_f.row(i),
                                                                   dshape_f[i]));
                     detail::eigen_perturbation_blocks(ctx, block_q(false), dlam, dshape, [&](Index i) {
-                        const Eigen::MatrixXd plain =
-                            detail::frequency_damping_perturbation(ctx.lambda(i), options.fs, dlam.row(i));
-                        double rho = 1.0;
-                        for (Index row : {0, 1}) {
-                            const double pl = plain.row(row).norm(), fr = ut_f[i].row(row).norm();
-                            rho = std::max(rho, fr > 0.0 ? pl / fr
-                                                         : (pl > 0.0 ? std::numeric_limits<double>::infinity() : 1.0));
-                        }
+                        const double rho = detail::noise_coupling(
+                            detail::frequency_damping_perturbation(ctx.lambda(i), options.fs, dlam.row(i)), ut_f[i]);
                         modes.noise_coupling(i) = rho;
                         modes.noise_coupled(i) = !(rho <= options.noise_coupling_limit);
                         return bool(modes.noise_coupled(i));

@@ -112,12 +112,9 @@ public:
                 ut_f.push_back(detail::modal_perturbation(ctx.lambda(i), fs, ss.C.cast<cd>() * ctx.phi.col(i),
                                                           modes.reference_component(i), dlam_f.row(i), dshape_f[i]));
             detail::eigen_perturbation_blocks(ctx, q_, dlam, dshape, [&](Index i) {
-                const Eigen::MatrixXd plain = detail::frequency_damping_perturbation(ctx.lambda(i), fs, dlam.row(i));
-                double rho = 1.0;  // how much of sigma_f or sigma_xi the noise directions carry
-                for (Index row : {0, 1}) {
-                    const double p = plain.row(row).norm(), f = ut_f[i].row(row).norm();
-                    rho = std::max(rho, f > 0.0 ? p / f : (p > 0.0 ? std::numeric_limits<double>::infinity() : 1.0));
-                }
+                // how much of sigma_f or sigma_xi the noise directions carry
+                const double rho = detail::noise_coupling(
+                    detail::frequency_damping_perturbation(ctx.lambda(i), fs, dlam.row(i)), ut_f[i]);
                 modes.noise_coupling(i) = rho;
                 modes.noise_coupled(i) = !(rho <= noise_.coupling_limit);
                 return bool(modes.noise_coupled(i));

@@ -137,6 +137,18 @@ inline Eigen::MatrixXd frequency_damping_perturbation(cd lambda, double fs,
     return ut;
 }
 
+/// The noise coupling rho of a pole (docs/uq-math.md eq. 5.14): max(1, sigma_f plain / frozen,
+/// sigma_xi plain / frozen) from the [f, xi] rows of its plain and frozen factors (extra rows are
+/// ignored); infinite when a frozen sigma is 0 and the plain one is not.
+inline double noise_coupling(const Eigen::Ref<const Eigen::MatrixXd>& plain, const Eigen::Ref<const Eigen::MatrixXd>& frozen) {
+    double rho = 1.0;
+    for (Index row : {0, 1}) {
+        const double p = plain.row(row).norm(), f = frozen.row(row).norm();
+        rho = std::max(rho, f > 0.0 ? p / f : (p > 0.0 ? std::numeric_limits<double>::infinity() : 1.0));
+    }
+    return rho;
+}
+
 /// Stage 5 for one mode: rows [f, xi, Re shape (l), Im shape (l)] of the perturbation factor
 /// from d lambda (1 x nb) and d(C phi) (l x nb) (docs/uq-math.md §7, normalised shape with the
 /// reference component fixed at its nominal index).
