@@ -360,6 +360,17 @@ def rademacher_signs(n_blocks, draws=NOISE_FLOOR_DRAWS):
     return eps
 
 
+def noise_coupling(sd_base, sd_frozen):
+    """ρ of eq. 5.14 per mode from the (n_modes × 2) std of [f, ξ] of the plain and the frozen
+    propagation: max(1, plain / frozen) over f and ξ, ∞ where a frozen std is 0 and the plain is not."""
+    sd_base, sd_frozen = np.asarray(sd_base), np.asarray(sd_frozen)
+    if sd_base.shape[0] == 0:
+        return np.ones(0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = np.where(sd_frozen > 0, sd_base / sd_frozen, np.where(sd_base > 0, np.inf, 1.0))
+    return np.maximum(1.0, ratio.max(axis=1))
+
+
 def noise_floor(H, T_H, k_max, factor=1.5):
     """k* of §5.5 (eq. 5.12), by the definition: the smallest k < min(k_max, r) with
     s_k < factor * delta_k, delta_k = RMS_t ||(U^T dH_t V)[k:, k:]||_2 over the Rademacher
@@ -584,9 +595,7 @@ def _identify(y, u, fs, p, q, orders, n_blocks, references, uncertainty, demean,
             if "frozen" in covs:
                 sd_b = np.sqrt(np.clip(np.diagonal(covs["base"], axis1=1, axis2=2)[:, :2], 0, None))
                 sd_f = np.sqrt(np.clip(np.diagonal(covs["frozen"], axis1=1, axis2=2)[:, :2], 0, None))
-                with np.errstate(divide="ignore", invalid="ignore"):
-                    ratio = np.where(sd_f > 0, sd_b / sd_f, np.where(sd_b > 0, np.inf, 1.0))
-                rho = np.maximum(1.0, ratio.max(axis=1))
+                rho = noise_coupling(sd_b, sd_f)
                 use = rho <= noise_coupling_limit
                 covm[use] = covs["frozen"][use]
                 if path != "explicit":

@@ -138,14 +138,12 @@ def gamma_factor(H, T_H, n_max, frozen_from=None):
     du = (np.einsum("ai,ijk->ajk", U, Om)
           + (dHv - np.einsum("ai,ijk->ajk", U, Ua[:, :n_max, :])) / s[None, :n_max, None])   # (5.6)
     ds = np.einsum("jjk->jk", Ua[:n_max, :n_max, :])
-    dG = (U[:, :n_max, None] * (ds / (2 * np.sqrt(s[:n_max, None])))[None]
-          + np.sqrt(s[None, :n_max, None]) * du)                                           # (5.3)
+    scale = U[:, :n_max, None] * (ds / (2 * np.sqrt(s[:n_max, None])))[None]
+    dG = scale + np.sqrt(s[None, :n_max, None]) * du                                       # (5.3)
     if frozen_from is None:
         return Gam, dG
     du[:, frozen_from:, :] = 0.0                                                           # (5.13)
-    dGf = (U[:, :n_max, None] * (ds / (2 * np.sqrt(s[:n_max, None])))[None]
-           + np.sqrt(s[None, :n_max, None]) * du)
-    return Gam, dG, dGf
+    return Gam, dG, scale + np.sqrt(s[None, :n_max, None]) * du
 
 
 # --------------------------------------------------------------------------------------
@@ -380,11 +378,8 @@ def identify_modular(setups, *, fs, p, orders, ref_index=None, uncertainty=True,
                 dGf = np.concatenate(merge_gamma_perturbation(camp, n, frozen=True), axis=2)
                 _, _, dAf, dCf = system_perturbation(Gg, dGf, camp.l_A, camp.l_g)
                 fac_f = modal_perturbation(A, C, dAf, dCf, fs, ref_index=ref_index)[1]
-                sd_b = np.linalg.norm(fac[:, :2, :], axis=2)
-                sd_f = np.linalg.norm(fac_f[:, :2, :], axis=2)
-                with np.errstate(divide="ignore", invalid="ignore"):
-                    ratio = np.where(sd_f > 0, sd_b / sd_f, np.where(sd_b > 0, np.inf, 1.0))
-                rho = np.maximum(1.0, ratio.max(axis=1)) if len(rho) else rho
+                rho = oracle.noise_coupling(np.linalg.norm(fac[:, :2, :], axis=2),
+                                            np.linalg.norm(fac_f[:, :2, :], axis=2))
                 use = rho <= noise_coupling_limit
                 fac = fac.copy()
                 fac[use] = fac_f[use]
