@@ -45,7 +45,7 @@ def test_every_study_is_smoke_tested():
     tested = set(HIGH_ORDER_RUNS) | {"prop.py", "earthquake_records.py", "settings_records.py", "selected_sigma_mc.py",
                                            "indicators_mc.py", "multisetup_mc.py", "automac_mc.py",
                                            "warnings_issue27.py", "warnings_issue27_premise.py",
-                                           "io_block_bias.py", "poser_mc.py"}
+                                           "io_block_bias.py", "poser_mc.py", "pyoma2_multisetup.py"}
     assert scripts == tested
 
 
@@ -113,6 +113,16 @@ def test_poser_mc(capsys):
     out = _module("poser_mc").main(n=2, configs=["diagram", "auto", "output-only"])  # frequency_range only
     assert "poser" not in out["output-only"][0] and out["output-only"][0]["modular"].shape == (6, 4)
     assert "frequency_range (0.5, 11) Hz only" in capsys.readouterr().out
+
+
+def test_pyoma2_multisetup(capsys, monkeypatch):
+    # modaluq's side only (pyOMA2 is not a test dependency: without it the peer's columns are left out)
+    monkeypatch.delenv("PYOMA2_PYTHON", raising=False)
+    study = _module("pyoma2_multisetup")
+    monkeypatch.setattr(study, "_has_pyoma2", lambda: False)
+    out = study.main(n_seeds=2)
+    assert out["pyoma2"] is None and ("modaluq modular", 12) in out["rows"]
+    assert "| mode | true f (Hz) |" in capsys.readouterr().out
 
 
 def test_settings_records_without_data(capsys, tmp_path):

@@ -91,11 +91,28 @@ struct SetupGamma {
     std::vector<Index> moving;
     Eigen::MatrixXd x, m;    ///< p r x n_max, p w x n_max
     Eigen::MatrixXd dx, dm;  ///< p r x (n_max nb), p w x (n_max nb)
-    Eigen::MatrixXd dxf, dmf;  ///< the same with the columns j >= k_star frozen (empty if none is)
+    /// The frozen dGamma's first k_star columns without its scale term (columns k_star k ..
+    /// k_star k + k_star - 1 are block k's; empty if nothing is frozen): its other columns only
+    /// scale, and scaling Gamma's columns changes the state basis, which moves no mode (§13.4).
+    Eigen::MatrixXd dxf, dmf;  ///< p r x (k_star nb), p w x (k_star nb)
+    /// Per block k (columns k n_max ..), for the unfrozen pass of a setup j >= 1 (§13.3): the
+    /// order-n terms are these matrices' leading n x n blocks (column i of dGamma does not depend
+    /// on the order), so the p w-row products are formed once, not at every order.
+    /// sa = M_up^T dM_dw + dM_up^T M_dw, sb = M_up^T dM_up + dM_up^T M_up, cx = X^T dX,
+    /// dxb = dX^T X_0 (X_0: setup 0's reference rows); up/dw = all but the last/first block row.
+    Eigen::MatrixXd sa, sb, cx, dxb;  ///< n_max x (n_max nb) each
+    Eigen::MatrixXd guu, gud;         ///< M_up^T M_up, M_up^T M_dw (n_max x n_max)
     bool freezes() const { return k_star < n_max; }
-    /// dGamma's reference and moving rows of block k at order n, frozen or not.
-    auto dX(Index k, Index n, bool frozen) const { return (frozen && freezes() ? dxf : dx).middleCols(k * n_max, n); }
-    auto dM(Index k, Index n, bool frozen) const { return (frozen && freezes() ? dmf : dm).middleCols(k * n_max, n); }
+    /// Whether order n is propagated with this setup's noise columns frozen in the frozen pass.
+    bool frozen_at(Index n, bool frozen) const { return frozen && freezes() && n > k_star; }
+    /// dGamma's reference and moving rows of block k at order n: all n columns, or, frozen, the
+    /// k_star columns that are not 0 (the others are dropped, see dxf).
+    auto dX(Index k, Index n, bool frozen) const {
+        return frozen_at(n, frozen) ? dxf.middleCols(k * k_star, k_star) : dx.middleCols(k * n_max, n);
+    }
+    auto dM(Index k, Index n, bool frozen) const {
+        return frozen_at(n, frozen) ? dmf.middleCols(k * k_star, k_star) : dm.middleCols(k * n_max, n);
+    }
 };
 
 /// Row i w + c of the result is row i l + rows[c] of g (block rows of l rows).
@@ -111,9 +128,12 @@ inline Eigen::MatrixXd block_rows_of(const Eigen::Ref<const Eigen::MatrixXd>& g,
 /// dGamma = D S^{1/2} + U_n diag(d s_j / (2 sqrt s_j)), D = U Omega + dH V_n S^-1 (5.3)-(5.7),
 /// every direction free (unfrozen); d s_1 in `ds1`. With `frozen`, also the same with D's
 /// columns j >= frozen_from set to 0 (5.13): a frozen column only scales, d gamma_j = u_j d s_j / (2 sqrt s_j).
+/// With `frozen_free`, the first frozen_from columns of that frozen dGamma without the scale term
+/// U_n diag(...) = Gamma_n diag(...): a change of the state basis, which moves no mode.
 inline Eigen::MatrixXd gamma_perturbation_setup(const Realization& re, const Eigen::Ref<const Eigen::MatrixXd>& dh,
                                                 Index n, double& ds1, Index frozen_from = 0,
-                                                Eigen::MatrixXd* frozen = nullptr) {
+                                                Eigen::MatrixXd* frozen = nullptr,
+                                                Eigen::MatrixXd* frozen_free = nullptr) {
     const Eigen::VectorXd& s = re.singular_values();
     const SvdPerturbation sp = svd_perturbation(re.U(), re.V(), s, dh, n, n);
     ds1 = sp.Ua(0, 0);
@@ -121,20 +141,23 @@ inline Eigen::MatrixXd gamma_perturbation_setup(const Realization& re, const Eig
     Eigen::MatrixXd d(re.U().rows(), n);
     gemm(d, re.U(), Op::N, sp.omega, Op::N);
     d += sp.P.leftCols(n) * s.head(n).cwiseInverse().asDiagonal();
+    d *= sq.asDiagonal();
+    const Index k = std::clamp<Index>(frozen_from, 0, n);
+    if (frozen_free) *frozen_free = d.leftCols(k);
     const Eigen::VectorXd e = sp.Ua.diagonal().head(n).cwiseQuotient(2.0 * sq);
     const Eigen::MatrixXd scale = re.U().leftCols(n) * e.asDiagonal();
     if (frozen) {
-        const Index k = std::clamp<Index>(frozen_from, 0, n);
         *frozen = scale;
-        frozen->leftCols(k) += d.leftCols(k) * sq.head(k).asDiagonal();
+        frozen->leftCols(k) += d.leftCols(k);
     }
-    return d * sq.asDiagonal() + scale;
+    return d + scale;
 }
 
 /// Group sums of the Q matrices of §13.3 for one group (rows p w, up = all but the last block
 /// row, dw = all but the first): Q1 += G_up^T dG_up, Q2 += G_dw^T dG_up, Q3 += G_up^T dG_dw.
 inline void add_group_q(const Eigen::Ref<const Eigen::MatrixXd>& g, const Eigen::Ref<const Eigen::MatrixXd>& dg,
-                        Index w, Eigen::MatrixXd& q1, Eigen::MatrixXd& q2, Eigen::MatrixXd& q3) {
+                        Index w, Eigen::Ref<Eigen::MatrixXd> q1, Eigen::Ref<Eigen::MatrixXd> q2,
+                        Eigen::Ref<Eigen::MatrixXd> q3) {
     const Index rows = g.rows() - w;
     if (rows <= 0) return;
     gemm(q1, g.topRows(rows), Op::T, dg.topRows(rows), Op::N, 1.0, 1.0);
@@ -262,23 +285,47 @@ inline SetupsIdentification identify_setups(const std::vector<SetupData>& setups
                 g.k_star = detail::noise_floor(re, t_h, b, options.noise_floor_factor, nm + 1, options.threads).k;
             g.dx.resize(p * r, nm * g.nb);
             g.dm.resize(p * g.w, nm * g.nb);
-            if (g.freezes()) {
-                g.dxf.resize(p * r, nm * g.nb);
-                g.dmf.resize(p * g.w, nm * g.nb);
-            }
+            const Index kf = g.freezes() ? g.k_star : 0;
+            g.dxf.resize(p * r, kf * g.nb);
+            g.dmf.resize(p * g.w, kf * g.nb);
             Eigen::VectorXd ds1(g.nb);
             detail::parallel_for(g.nb, options.threads, [&](Index k) {
                 Eigen::Map<const Eigen::MatrixXd> dh(t_h.col(k).data(), a, b);
                 Eigen::MatrixXd dgf;
-                const Eigen::MatrixXd dg = detail::gamma_perturbation_setup(re, dh, nm, ds1(k), g.k_star,
-                                                                            g.freezes() ? &dgf : nullptr);
+                const Eigen::MatrixXd dg = detail::gamma_perturbation_setup(re, dh, nm, ds1(k), kf, nullptr,
+                                                                            kf > 0 ? &dgf : nullptr);
                 g.dx.middleCols(k * nm, nm) = detail::block_rows_of(dg, g.l, s.references);
                 g.dm.middleCols(k * nm, nm) = detail::block_rows_of(dg, g.l, g.moving);
-                if (g.freezes()) {
-                    g.dxf.middleCols(k * nm, nm) = detail::block_rows_of(dgf, g.l, s.references);
-                    g.dmf.middleCols(k * nm, nm) = detail::block_rows_of(dgf, g.l, g.moving);
+                if (kf > 0) {
+                    g.dxf.middleCols(k * kf, kf) = detail::block_rows_of(dgf, g.l, s.references);
+                    g.dmf.middleCols(k * kf, kf) = detail::block_rows_of(dgf, g.l, g.moving);
                 }
             });
+            if (j > 0 && g.w > 0) {  // the unfrozen pass's per-block products (SetupGamma::sa ...)
+                const Index rw = (p - 1) * g.w, n0 = sg[0].n_max;
+                const auto m_up = g.m.topRows(rw), m_dw = g.m.bottomRows(rw);
+                g.guu.resize(nm, nm);
+                g.gud.resize(nm, nm);
+                gemm(g.guu, m_up, Op::T, m_up, Op::N);
+                gemm(g.gud, m_up, Op::T, m_dw, Op::N);
+                g.sa.resize(nm, nm * g.nb);
+                g.sb.resize(nm, nm * g.nb);
+                g.cx.resize(nm, nm * g.nb);
+                g.dxb = Eigen::MatrixXd::Zero(nm, nm * g.nb);
+                detail::parallel_for(g.nb, options.threads, [&](Index k) {
+                    const auto dm = g.dm.middleCols(k * nm, nm);
+                    const auto dx = g.dx.middleCols(k * nm, nm);
+                    auto sa = g.sa.middleCols(k * nm, nm);
+                    auto sb = g.sb.middleCols(k * nm, nm);
+                    gemm(sa, m_up, Op::T, dm.bottomRows(rw), Op::N);
+                    gemm(sa, dm.topRows(rw), Op::T, m_dw, Op::N, 1.0, 1.0);
+                    gemm(sb, m_up, Op::T, dm.topRows(rw), Op::N);
+                    sb += sb.transpose().eval();
+                    gemm(g.cx.middleCols(k * nm, nm), g.x, Op::T, dx, Op::N);
+                    const Index c = std::min(nm, n0);
+                    gemm(g.dxb.middleCols(k * nm, c), dx, Op::T, sg[0].x.leftCols(c), Op::N);
+                });
+            }
             snr = re.singular_values()(0) / ds1.norm();
             out.n_blocks += g.nb;
             min_block = std::min(min_block, cov.block_length);
@@ -397,34 +444,97 @@ inline SetupsIdentification identify_setups(const std::vector<SetupData>& setups
                 }
                 // The Q matrices of every block of every setup, with each setup's noise columns
                 // frozen or not (§13.4).
+                // M_j W_j's first k*_j columns, for the frozen pass of a setup with frozen columns;
+                // T_j^T Gud, T_j^T Gud^T, T_j^T Guu at order n for its unfrozen pass.
+                std::vector<Eigen::MatrixXd> MW(ns), ygud(ns), ygdu(ns), yguu(ns);
+                for (Index j = 1; j < ns; ++j) {
+                    if (sg[j].w == 0) continue;
+                    if (sg[j].frozen_at(n, true)) MW[j] = sg[j].m.leftCols(n) * Wj[j].leftCols(sg[j].k_star);
+                    ygud[j] = T[j].transpose() * sg[j].gud.topLeftCorner(n, n);
+                    ygdu[j] = T[j].transpose() * sg[j].gud.topLeftCorner(n, n).transpose();
+                    yguu[j] = T[j].transpose() * sg[j].guu.topLeftCorner(n, n);
+                }
+                // The Q matrices of every block of every setup, with each setup's noise columns
+                // frozen or not (§13.4). A block's dX and dM have c <= n columns, the others 0:
+                // frozen, only the first k*_j move (the rest only scale, a change of basis).
                 const auto block_q = [&](bool frozen) {
-                    detail::BlockQ bq(nb_total, n, l_g);
+                    detail::BlockQ bq(nb_total, n, l_g, true);  // formed at this order only: blocked
                     for (Index j = 0; j < ns; ++j) {
                         const detail::SetupGamma& g = sg[j];
                         detail::parallel_for(g.nb, options.threads, [&](Index k) {
                             const auto dX = g.dX(k, n, frozen);
                             const auto dM = g.dM(k, n, frozen);
-                            Eigen::MatrixXd q1 = Eigen::MatrixXd::Zero(n, n), q2 = q1, q3 = q1;
+                            const Index c = dX.cols();
+                            Eigen::MatrixXd q1(n, n), q2(n, n), q3(n, n);
                             Eigen::MatrixXd q4 = Eigen::MatrixXd::Zero(l_g, n);
-                            if (j == 0) {  // (12.6)
-                                detail::add_group_q(B, dX, r, q1, q2, q3);
-                                detail::add_group_q(G[0], dM, g.w, q1, q2, q3);
-                                // (P_j dX)_up = P_j,up dX: the row selection falls on P_j
-                                q1.noalias() += k1 * dX;
-                                q2.noalias() += k2 * dX;
-                                q3.noalias() += k3 * dX;
-                                q4.topRows(r) = dX.topRows(r);
-                                q4.middleRows(c0[0], g.w) = dM.topRows(g.w);
-                                for (Index i = 1; i < ns; ++i)
-                                    if (sg[i].w > 0) q4.middleRows(c0[i], sg[i].w).noalias() = P[i].topRows(sg[i].w) * dX;
-                            } else {  // (12.5): dT = -X^+ dX T + W dX^T E; dG = dM T + M dT
-                                Eigen::MatrixXd dT = -(Xp[j] * dX) * T[j];
-                                dT.noalias() += Wj[j] * (dX.transpose() * E[j]);
-                                Eigen::MatrixXd dG = dM * T[j];
-                                dG.noalias() += sg[j].m.leftCols(n) * dT;
-                                detail::add_group_q(G[j], dG, g.w, q1, q2, q3);
-                                q4.middleRows(c0[j], g.w) = dG.topRows(g.w);
+                            if (j == 0 || g.w == 0) {
+                                q1.setZero();
+                                q2.setZero();
+                                q3.setZero();
                             }
+                            if (j == 0) {  // (12.6)
+                                detail::add_group_q(B, dX, r, q1.leftCols(c), q2.leftCols(c), q3.leftCols(c));
+                                detail::add_group_q(G[0], dM, g.w, q1.leftCols(c), q2.leftCols(c), q3.leftCols(c));
+                                // (P_j dX)_up = P_j,up dX: the row selection falls on P_j
+                                q1.leftCols(c).noalias() += k1 * dX;
+                                q2.leftCols(c).noalias() += k2 * dX;
+                                q3.leftCols(c).noalias() += k3 * dX;
+                                q4.topRows(r).leftCols(c) = dX.topRows(r);
+                                q4.middleRows(c0[0], g.w).leftCols(c) = dM.topRows(g.w);
+                                for (Index i = 1; i < ns; ++i) {
+                                    const Index wi = sg[i].w;
+                                    if (wi > 0) q4.middleRows(c0[i], wi).leftCols(c).noalias() = P[i].topRows(wi) * dX;
+                                }
+                            } else if (g.w > 0 && c < n) {
+                                // (12.5) with dX = [dX_c 0]: dT = -(X^+ dX_c) T_c + W_c (dX_c^T E), so
+                                // dG = dM_c T_c + M dT = [dM_c - P_j dX_c, M W_c] [T_c; dX_c^T E], rank 2c.
+                                Eigen::MatrixXd lg(p * g.w, 2 * c), rg(2 * c, n);
+                                lg.leftCols(c) = dM;
+                                lg.leftCols(c).noalias() -= P[j] * dX;
+                                lg.rightCols(c) = MW[j];
+                                rg.topRows(c) = T[j].topRows(c);
+                                gemm(rg.bottomRows(c), dX, Op::T, E[j], Op::N);
+                                const Index rw = (p - 1) * g.w;
+                                Eigen::MatrixXd h(n, 2 * c);
+                                gemm(h, G[j].topRows(rw), Op::T, lg.topRows(rw), Op::N);
+                                gemm(q1, h, Op::N, rg, Op::N);
+                                gemm(h, G[j].bottomRows(rw), Op::T, lg.topRows(rw), Op::N);
+                                gemm(q2, h, Op::N, rg, Op::N);
+                                gemm(h, G[j].topRows(rw), Op::T, lg.bottomRows(rw), Op::N);
+                                gemm(q3, h, Op::N, rg, Op::N);
+                                q4.middleRows(c0[j], g.w).noalias() = lg.topRows(g.w) * rg;
+                            } else if (g.w > 0) {
+                                // (12.5): dT = -X^+ dX T + W dX^T E = W (dX^T B - (X^T dX + dX^T X) T),
+                                // dG = dM T + M dT, and with G = M T the Q sums in n x n terms:
+                                // Q3 + Q2^T = T^T sa T + (T^T Gud) dT + ((T^T Gud^T) dT)^T,
+                                // Q1 + Q1^T = T^T sb T + (T^T Guu) dT + (...)^T (SetupGamma::sa ...).
+                                const Index nm = g.n_max;
+                                const auto lead = [&](const Eigen::MatrixXd& m) {
+                                    return m.block(0, k * nm, n, n);
+                                };
+                                Eigen::MatrixXd s = lead(g.cx) + lead(g.cx).transpose();
+                                Eigen::MatrixXd rhs = lead(g.dxb);
+                                gemm(rhs, s, Op::N, T[j], Op::N, -1.0, 1.0);
+                                Eigen::MatrixXd dT(n, n), tmp(n, n), a(n, n), b(n, n);
+                                gemm(dT, Wj[j], Op::N, rhs, Op::N);
+                                gemm(tmp, lead(g.sa), Op::N, T[j], Op::N);
+                                gemm(a, T[j], Op::T, tmp, Op::N);
+                                gemm(a, ygud[j], Op::N, dT, Op::N, 1.0, 1.0);
+                                gemm(tmp, ygdu[j], Op::N, dT, Op::N);
+                                a += tmp.transpose();
+                                gemm(tmp, lead(g.sb), Op::N, T[j], Op::N);
+                                gemm(b, T[j], Op::T, tmp, Op::N);
+                                gemm(tmp, yguu[j], Op::N, dT, Op::N);
+                                b += tmp + tmp.transpose();
+                                auto q4j = q4.middleRows(c0[j], g.w);
+                                q4j.noalias() = dM.topRows(g.w) * T[j];
+                                q4j.noalias() += sg[j].m.topRows(g.w).leftCols(n) * dT;
+                                bq.set(col0[j] + k, a, b, q4);
+                                
+                                
+                                return;
+                            }
+                            
                             bq.set(col0[j] + k, q3 + q2.transpose(), q1 + q1.transpose(), q4);
                         });
                     }

@@ -53,8 +53,9 @@ struct OrderContext {
 ///   Z_k = Qa_k [Re phi, Im phi] - (Qb_k [Re phi, Im phi]) Lambda   (leading n x n of Qa_k)
 ///   M = chi^H W (n x n, once per order),   d lambda_i = M_{k_i,:} Z_i / (chi_i^H phi_i),
 ///   d(C phi_i) = G_i Z_i + Q4 phi_i   with G_i = C V diag(1 / (lambda_i - lambda_j))_{j != k_i} M,
-/// where Z_i (n x nb) gathers column i of every block's Z. With BlockQ's layout, column i of
-/// the stacked product read as an n_b x n matrix is Z_i^T: no gathering copy.
+/// where Z_i (n x nb) gathers column i of every block's Z. With BlockQ's interleaved layout,
+/// column i of the stacked product read as an n_b x n matrix is Z_i^T, and with the blocked
+/// one, read as n x n_b, Z_i: no gathering copy either way.
 /// `with_shape(i)`, called once every d lambda is known, selects the modes whose d(C phi) is
 /// formed (all when empty); the others get an empty dshape (the unfrozen pass of §5.5 needs the
 /// shapes of flagged poles only).
@@ -65,6 +66,7 @@ inline void eigen_perturbation_blocks(const OrderContext& ctx, const BlockQ& q, 
     const Eigenstructure& e = *ctx.eig;
     Eigen::MatrixXd ph(n, 2 * nm);
     ph << ctx.phi.real(), ctx.phi.imag();
+    require(!q.blocked || n == q.n_max, "eigen_perturbation_blocks: a blocked BlockQ holds one order");
     Eigen::MatrixXd za(nb * n, 2 * nm), zb(nb * n, 2 * nm);
     gemm(za, q.qa.topLeftCorner(nb * n, n), Op::N, ph, Op::N);
     gemm(zb, q.qb.topLeftCorner(nb * n, n), Op::N, ph, Op::N);
@@ -75,19 +77,31 @@ inline void eigen_perturbation_blocks(const OrderContext& ctx, const BlockQ& q, 
     ctx.rn.triangularView<Eigen::Upper>().solveInPlace(mt);
     const Eigen::MatrixXcd M = mt.transpose();
 
-    using Cols = Eigen::Map<const Eigen::MatrixXd>;
-    Eigen::MatrixXcd zt(nb, n);
-    const auto z_transposed = [&](Index i) {  // Z_i^T = (a_re + i a_im) - lambda (b_re + i b_im)
+    // Z_i (n x nb) = (a_re + i a_im) - lambda (b_re + i b_im), a and b column i of za and zb
+    // seen block by block: interleaved, as its transpose Z_i^T (nb x n) read in place; blocked,
+    // as Z_i itself, which is then contiguous (z_of returns what the products below take).
+    Eigen::MatrixXcd zt(q.blocked ? n : nb, q.blocked ? nb : n);
+    const auto fill_z = [&](Index i) {
         const cd lam = ctx.lambda(i);
-        const Cols a_re(za.col(i).data(), nb, n), a_im(za.col(nm + i).data(), nb, n);
-        const Cols b_re(zb.col(i).data(), nb, n), b_im(zb.col(nm + i).data(), nb, n);
-        zt.real() = a_re - lam.real() * b_re + lam.imag() * b_im;
-        zt.imag() = a_im - lam.real() * b_im - lam.imag() * b_re;
+        if (q.blocked) {
+            using Map = Eigen::Map<const Eigen::MatrixXd>;
+            const Map a_re(za.col(i).data(), n, nb), a_im(za.col(nm + i).data(), n, nb);
+            const Map b_re(zb.col(i).data(), n, nb), b_im(zb.col(nm + i).data(), n, nb);
+            zt.real() = a_re - lam.real() * b_re + lam.imag() * b_im;
+            zt.imag() = a_im - lam.real() * b_im - lam.imag() * b_re;
+        } else {
+            const auto a_re = q.blocks_of(za.col(i).data(), n), a_im = q.blocks_of(za.col(nm + i).data(), n);
+            const auto b_re = q.blocks_of(zb.col(i).data(), n), b_im = q.blocks_of(zb.col(nm + i).data(), n);
+            zt.real() = a_re - lam.real() * b_re + lam.imag() * b_im;
+            zt.imag() = a_im - lam.real() * b_im - lam.imag() * b_re;
+        }
     };
+    const Op z_op = q.blocked ? Op::N : Op::T;  // Z_i = op(zt)
     dlambda.resize(nm, nb);
     for (Index i = 0; i < nm; ++i) {
-        z_transposed(i);
-        dlambda.row(i).noalias() = M.row(e.kept[i]) * zt.transpose();
+        fill_z(i);
+        if (q.blocked) dlambda.row(i).noalias() = M.row(e.kept[i]) * zt;
+        else dlambda.row(i).noalias() = M.row(e.kept[i]) * zt.transpose();
         dlambda.row(i) /= ctx.den(i);
     }
 
@@ -115,11 +129,16 @@ inline void eigen_perturbation_blocks(const OrderContext& ctx, const BlockQ& q, 
     gemm(g_all, cvc, Op::N, M, Op::N);
     for (Index w = 0; w < nw; ++w) {
         const Index i = wanted[w];
-        z_transposed(i);
+        fill_z(i);
         dshape[i].resize(l, nb);
-        dshape[i].real() = Cols(z4.col(i).data(), nb, l).transpose();
-        dshape[i].imag() = Cols(z4.col(nm + i).data(), nb, l).transpose();
-        gemm(dshape[i], g_all.middleRows(w * l, l), Op::N, zt, Op::T, 1.0, 1.0);
+        if (q.blocked) {
+            dshape[i].real() = Eigen::Map<const Eigen::MatrixXd>(z4.col(i).data(), l, nb);
+            dshape[i].imag() = Eigen::Map<const Eigen::MatrixXd>(z4.col(nm + i).data(), l, nb);
+        } else {
+            dshape[i].real() = q.blocks_of(z4.col(i).data(), l).transpose();
+            dshape[i].imag() = q.blocks_of(z4.col(nm + i).data(), l).transpose();
+        }
+        gemm(dshape[i], g_all.middleRows(w * l, l), Op::N, zt, z_op, 1.0, 1.0);
     }
 }
 

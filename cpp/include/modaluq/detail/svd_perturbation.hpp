@@ -160,9 +160,13 @@ private:
 /// Q matrices of every block at n_max, stored so that one order's leading blocks of all
 /// blocks are one contiguous sub-matrix: row k + n_b i of `qa` is row i of block k's Qa.
 /// Order n then needs qa.topLeftCorner(n_b n, n): stage 4 is one GEMM for all blocks
-/// instead of n_b small ones.
+/// instead of n_b small ones. `blocked` stores block k's rows contiguously instead (row
+/// k n_max + i), for Q matrices formed anew at each order (the merge of setups): those are
+/// used at n = n_max only, and each block is then written in columns of n_max doubles rather
+/// than one scattered element per row.
 struct BlockQ {
     Index nb = 0, n_max = 0, l = 0;
+    bool blocked = false;
     Eigen::MatrixXd qa;  ///< (n_b n_max) x n_max: Q3 + Q2^T
     Eigen::MatrixXd qb;  ///< (n_b n_max) x n_max: Q1 + Q1^T
     Eigen::MatrixXd q4;  ///< (n_b l) x n_max: dC
@@ -170,9 +174,9 @@ struct BlockQ {
     using ConstView = Eigen::Map<const Eigen::MatrixXd, 0, Eigen::Stride<Eigen::Dynamic, Eigen::Dynamic>>;
 
     BlockQ() = default;
-    BlockQ(Index n_blocks, Index n_max_, Index n_outputs)
-        : nb(n_blocks), n_max(n_max_), l(n_outputs), qa(nb * n_max, n_max), qb(nb * n_max, n_max),
-          q4(nb * l, n_max) {}
+    BlockQ(Index n_blocks, Index n_max_, Index n_outputs, bool blocked_ = false)
+        : nb(n_blocks), n_max(n_max_), l(n_outputs), blocked(blocked_), qa(nb * n_max, n_max),
+          qb(nb * n_max, n_max), q4(nb * l, n_max) {}
 
     /// Block k's matrices (n_max x n_max, l x n_max) as strided views.
     ConstView qa_block(Index k) const { return view(qa, k, n_max); }
@@ -186,15 +190,29 @@ struct BlockQ {
         view(q4, k, l) = c;
     }
 
+    /// A column z of a product (qa, qb or q4 restricted to order n's rows) * X, nb rows of
+    /// `rows` (n or l) per block, as the nb x rows matrix whose row k is block k's.
+    ConstView blocks_of(const double* z, Index rows) const {
+        using S = Eigen::Stride<Eigen::Dynamic, Eigen::Dynamic>;
+        return blocked ? ConstView(z, nb, rows, S(1, rows)) : ConstView(z, nb, rows, S(nb, 1));
+    }
+
 private:
-    /// Block k of m (rows x n_max): every n_b-th row from row k.
+    /// Block k of m (rows x n_max): interleaved, every n_b-th row from row k; blocked, rows
+    /// k rows .. k rows + rows - 1.
     Eigen::Stride<Eigen::Dynamic, Eigen::Dynamic> stride(const Eigen::MatrixXd& m) const {
-        return {m.rows(), nb};
+        return blocked ? Eigen::Stride<Eigen::Dynamic, Eigen::Dynamic>(m.rows(), 1)
+                       : Eigen::Stride<Eigen::Dynamic, Eigen::Dynamic>(m.rows(), nb);
+    }
+    const double* start(const Eigen::MatrixXd& m, Index k, Index rows) const {
+        return m.data() + (blocked ? k * rows : k);
     }
     ConstView view(const Eigen::MatrixXd& m, Index k, Index rows) const {
-        return ConstView(m.data() + k, rows, n_max, stride(m));
+        return ConstView(start(m, k, rows), rows, n_max, stride(m));
     }
-    View view(Eigen::MatrixXd& m, Index k, Index rows) { return View(m.data() + k, rows, n_max, stride(m)); }
+    View view(Eigen::MatrixXd& m, Index k, Index rows) {
+        return View(const_cast<double*>(start(m, k, rows)), rows, n_max, stride(m));
+    }
 };
 
 }  // namespace detail
