@@ -27,7 +27,7 @@ from .checks import (
 )
 from .io import Recording, load
 from .io.campaign import Campaign, load_campaign
-from .poser import check_references_after_modular, identify_poser
+from .poser import check_references_after_modular, identify_poser, reference_check_orders
 from .preprocess import preprocess
 from .results import IdentificationWarning, Result, result_from_core, warn_all
 from .settings import Settings
@@ -356,7 +356,8 @@ def identify_setups(setups, *, fs=None, references: Sequence[str] | None = None,
     result = result_from_core(ident, record, l_g, n_in, output_names=dof_names)
     warn_all(result)
     single = dict(record, setups=None)
-    check_references_after_modular(core_setups, o, single, names_per_setup, n_inputs_per_setup, refs)
+    o_check = s.replace(orders=reference_check_orders(s.orders)).to_core(rate)
+    check_references_after_modular(core_setups, o_check, single, names_per_setup, n_inputs_per_setup, refs)
     return result
 
 

@@ -32,7 +32,7 @@ from .stabilization import stabilization_diagram
 REFERENCE_TEST_LEVEL = 1e-6
 
 __all__ = ["REFERENCE_TEST_LEVEL", "PoserResult", "ReferenceCheck", "ReferenceMismatchWarning", "identify_each_setup",
-           "poser_merge", "reference_check", "warn_reference_mismatch"]
+           "poser_merge", "reference_check", "reference_check_orders", "warn_reference_mismatch"]
 
 
 class ReferenceMismatchWarning(ModalUQWarning):
@@ -267,11 +267,29 @@ def identify_poser(core_setups, options, record: dict, names_per_setup, n_inputs
         warnings=own + tuple(msgs))
 
 
+#: The modular merge's reference check identifies each setup at most at this many of the orders.
+REFERENCE_CHECK_ORDERS = 12
+
+
+def reference_check_orders(orders, at_most: int = REFERENCE_CHECK_ORDERS) -> list:
+    """At most ``at_most`` of ``orders``, evenly spread and the highest kept: the reference check
+    needs each setup's modes with their σ, not a fine diagram, and each order of a setup's diagram
+    costs about as much as its whole identification at the highest order divided by the number
+    of orders (bench/multisetup.py)."""
+    orders = sorted({int(n) for n in orders})
+    if len(orders) <= at_most:
+        return orders
+    picks = np.unique(np.round(np.linspace(0, len(orders) - 1, at_most)).astype(int))
+    return [orders[i] for i in picks]
+
+
 def check_references_after_modular(core_setups, options, record: dict, names_per_setup, n_inputs_per_setup,
                                    reference_names) -> ReferenceCheck | None:
     """The reference check for the modular merge: each setup identified alone and its modes
     selected (as PoSER does), the references tested across setups, a
-    :class:`ReferenceMismatchWarning` per rejection. None without uncertainty or with one reference."""
+    :class:`ReferenceMismatchWarning` per rejection. None without uncertainty or with one reference.
+    ``options`` are the setups' identification options; give them with
+    :func:`reference_check_orders` of the merge's orders (the check does not need every order)."""
     if len(reference_names) < 2 or not options.uncertainty or len(core_setups) < 2:
         return None
     results = identify_each_setup(core_setups, options, record, names_per_setup, n_inputs_per_setup)

@@ -133,3 +133,32 @@ def test_the_files_settings_are_named_as_written_and_geometry_is_replaced(campai
     assert main(["identify", "--setups", str(campaign_file), *FAST, "--geometry", str(geo)]) == 2
     err = capsys.readouterr().err
     assert f"geometry {geo}:" in err and "R12" in err
+
+
+def test_an_input_output_campaign_file_end_to_end(tmp_path, capsys):
+    """A campaign file with ``inputs``: each setup's CSV holds the measured force F5 as its last
+    column; the merge is input/output and the modes are those of the deck."""
+    from modaluq.simulate.campaign import DEFAULT_DURATIONS, simulate_campaign
+
+    camp = simulate_campaign(5, durations=tuple(d / 4 for d in DEFAULT_DURATIONS), input_dofs=("L5",),
+                             input_std=1.0, unknown_input_std=0.3)
+    entries = []
+    for j, s in enumerate(camp.setups):
+        path = tmp_path / f"setup{j + 1}.csv"
+        names = list(s.channels) + ["F5"]
+        np.savetxt(path, np.column_stack([np.arange(len(s.y)) / camp.fs, s.y, s.u]), delimiter=",",
+                   header=",".join(["time [s]"] + names), comments="", fmt="%.6g")
+        entries.append(f'[[setup]]\nfile = "{path.name}"\n')
+    toml = tmp_path / "campaign.toml"
+    toml.write_text('references = ["L3", "R8"]\ninputs = ["F5"]\nfs = 25.0\n\n' + "\n".join(entries))
+    js = tmp_path / "modes.json"
+    status = main(["identify", "--setups", str(toml), *FAST, "--out", str(js)])
+    out, err = capsys.readouterr()
+    assert status == 0, err
+    assert "6 setups at 25 Hz, input/output" in out and "inputs: F5" in out
+    doc = json.loads(js.read_text())
+    assert doc["input"]["inputs"] == ["F5"] and "F5" not in doc["input"]["outputs"]
+    f0 = camp.frequency_hz
+    found = sorted(m["frequency_hz"] for m in doc["modes"])
+    assert len(found) == 6 and all(abs(f / t - 1) < 0.01 for f, t in zip(found, f0))
+    assert all(0 < m["frequency_std"] < 0.02 * m["frequency_hz"] for m in doc["modes"])
