@@ -1,4 +1,7 @@
-"""``modaluq validate``: the paper's Monte Carlo study from the command line.
+"""``modaluq validate``: the paper's Monte Carlo study from the command line, or, with
+``--split-halves FILE``, the check of σ on a measured record (its two halves identified alike,
+:func:`modaluq.validation.split_halves`; report on stdout, ``--out DIR`` adds ``report.md`` and
+``pairs.csv``).
 
 Prints the Markdown report on stdout,
 the progress bar on stderr and, with ``--out DIR``, writes ``report.md``, ``results.csv``
@@ -17,7 +20,7 @@ from pathlib import Path
 
 from ..checks import MAX_THREADS
 from ..validation import monte_carlo
-from .common import check_output_paths, integer_option, real_option
+from .common import CliError, check_output_paths, integer_option, option_error, real_option
 
 __all__ = ["register", "run"]
 
@@ -46,7 +49,64 @@ def _file_names(orders) -> list:
     return names
 
 
+#: Options of the simulation only (refused with --split-halves) and of the record only (refused without).
+SIMULATION_ONLY = ("records", "samples", "unknown_input_std", "damping_ratio", "n_dof", "input_dofs", "output_dofs",
+                   "seed", "processes", "noise_coupling_limit")
+RECORD_ONLY = ("fs", "format", "read_option", "inputs", "outputs", "frequency_range", "start", "stop")
+
+
+def _option(name: str) -> str:
+    return "--" + name.replace("_", "-")
+
+
+def run_split_halves(args) -> int:
+    """``modaluq validate --split-halves FILE``: the measured-record check of σ."""
+    from ..analysis import Analysis
+    from ..settings import Settings
+    from ..validation import split_halves
+    from .identify import parse_read_options
+
+    bad = [_option(k) for k in SIMULATION_ONLY if getattr(args, k) is not None] + (
+        ["--no-freeze-noise"] if args.no_freeze_noise else [])
+    if bad:
+        raise CliError(f"{', '.join(bad)}: option(s) of the simulation, not of --split-halves")
+    out = None
+    if args.out is not None:
+        out = Path(args.out)
+        if out.exists() and not out.is_dir():
+            raise ValueError(f"--out must be a directory; {out} is a file")
+        check_output_paths([("--out", out / name) for name in ("report.md", "pairs.csv")], overwrite=args.overwrite)
+    options = set(vars(args))
+    try:
+        names = ("frequency_range", "start", "stop", "block_rows", "past_block_rows", "n_blocks")
+        given = {k: getattr(args, k) for k in names if getattr(args, k) is not None}
+        settings = Settings(**given, **({"orders": args.order} if args.order is not None else {}))
+        analysis = Analysis.from_file(args.split_halves, fs=args.fs, format=args.format,
+                                      read_options=parse_read_options(args.read_option), outputs=args.outputs,
+                                      inputs=args.inputs, settings=settings)
+        kw = {} if args.tolerance is None else {"max_frequency_difference": args.tolerance}
+        if not args.no_progress:
+            print(f"identifying the two halves of {args.split_halves} ...", file=sys.stderr)
+        check = split_halves(analysis, **kw)
+    except ValueError as exc:
+        raise option_error(exc, options) from None
+    text = check.report()
+    if out is not None:
+        out.mkdir(parents=True, exist_ok=True)
+        (out / "report.md").write_text(text, encoding="utf-8")
+        check.to_dataframe().to_csv(out / "pairs.csv", index=False)
+    sys.stdout.write(text)
+    if out is not None:
+        print(f"\nwrote report.md, pairs.csv to {out}", file=sys.stderr)
+    return 0
+
+
 def run(args) -> int:
+    if args.split_halves is not None:
+        return run_split_halves(args)
+    bad = [_option(k) for k in RECORD_ONLY if getattr(args, k) is not None]
+    if bad:
+        raise CliError(f"{', '.join(bad)}: option(s) of --split-halves FILE (a measured record)")
     given = {keyword: getattr(args, option) for option, keyword in KEYWORDS.items()
              if getattr(args, option) is not None}
     order = given.get("order", DEFAULTS["order"])
@@ -130,8 +190,28 @@ def register(subparsers) -> None:
     v.add_argument("--tolerance", type=real_option(0, 1, high_open=True), default=None,
                    help="relative frequency window that matches an identified mode to a true one "
                         f"(default {d['match_tolerance']:g})")
+    g = v.add_argument_group(
+        "split halves (a measured record)",
+        "--split-halves FILE identifies the record's two halves alike and compares each mode's two estimates "
+        "against their sigma: z = (x1 - x2) / sqrt(s1^2 + s2^2); if sigma is right, RMS z is about 1 and 95 % "
+        "of the z are within +-1.96. --block-rows, --past-block-rows, --n-blocks, --order (the diagram's orders) "
+        "and --tolerance (the relative frequency difference that pairs two modes, default 0.02) apply too.")
+    g.add_argument("--split-halves", metavar="FILE", default=None, help="the record (any format of modaluq identify)")
+    g.add_argument("--fs", type=float, default=None, metavar="HZ",
+                   help="sampling frequency in Hz (default: the file's)")
+    g.add_argument("--format", default=None, help="file format (default: from the extension)")
+    g.add_argument("--read-option", action="append", metavar="KEY=VALUE", default=None,
+                   help="option of the file reader, as for modaluq identify; repeat for several")
+    g.add_argument("--inputs", nargs="+", metavar="CH", default=None, help="known-input channels (default: none)")
+    g.add_argument("--outputs", nargs="+", metavar="CH", default=None, help="output channels (default: the others)")
+    g.add_argument("--frequency-range", nargs=2, type=real_option(0, low_open=False), default=None,
+                   metavar=("LO", "HI"), help="band of interest in Hz (as for modaluq identify)")
+    g.add_argument("--start", type=real_option(0, low_open=False), default=None, metavar="S",
+                   help="start of the window that is split, s")
+    g.add_argument("--stop", type=real_option(0), default=None, metavar="S", help="end of that window, s")
     v.add_argument("--out", metavar="DIR", default=None,
-                   help="directory for report.md, results.csv, summary.csv, results.npz and the histogram PNGs")
+                   help="directory for report.md, results.csv, summary.csv, results.npz and the histogram PNGs "
+                        "(--split-halves: report.md and pairs.csv)")
     v.add_argument("--overwrite", action="store_true", help="replace the files of an earlier run in --out")
     v.add_argument("--no-progress", action="store_true", help="no progress bar")
     v.set_defaults(func=run)

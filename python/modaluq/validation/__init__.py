@@ -4,6 +4,8 @@
 many independent records of the 6-DOF chain, each identified output-only and input/output,
 and per mode the mean analytic standard deviation compared with the sample standard
 deviation of the estimates.  ``modaluq validate`` runs it from the command line.
+:func:`split_halves` checks σ on a measured record instead: its two halves identified alike
+(``modaluq validate --split-halves FILE``).
 
 >>> from modaluq.validation import monte_carlo
 >>> mc = monte_carlo(200, processes=2)                               # doctest: +SKIP
@@ -13,6 +15,7 @@ deviation of the estimates.  ``modaluq validate`` runs it from the command line.
 
 from .montecarlo import MonteCarloResult, match_modes, monte_carlo, record_seed
 from .paper import METHOD_LABELS, METHODS, PAPER_N_RECORDS, PAPER_N_SAMPLES, PAPER_ORDER, PAPER_TABLE_1, PAPER_TABLE_2
+from .split_halves import SplitHalves, split_halves
 
 __all__ = [
     "METHODS",
@@ -26,4 +29,6 @@ __all__ = [
     "match_modes",
     "monte_carlo",
     "record_seed",
+    "SplitHalves",
+    "split_halves",
 ]

@@ -1,0 +1,188 @@
+"""The measured-record check of σ (issue 27, docs/validation.md "Split halves"): the two halves
+of one record identified alike, and each mode's two estimates compared against their σ.
+
+If the σ are right, z = (x₁ − x₂) / √(σ₁² + σ₂²) is standard normal for every mode found in both
+halves (the halves are independent records of the same structure): over many modes its RMS is
+about 1 and 95 % of the z lie within ±1.96. No simulation is needed, so it checks σ on the
+user's own record. A structure that changes between the halves (temperature, traffic mass, a
+strong-motion half and a coda) gives |z| > 1 that is not σ's fault: choose a stationary record.
+
+    >>> import modaluq
+    >>> from modaluq.analysis import Analysis
+    >>> from modaluq.simulate import simulate
+    >>> sim = simulate(n_samples=40_000, seed=3)
+    >>> a = Analysis.from_arrays(sim.y, fs=sim.fs, settings=modaluq.Settings(block_rows=15, orders=range(2, 31, 2)))
+    >>> check = split_halves(a)
+    >>> check.summary()["n_pairs"] >= 4
+    True
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..analysis import Analysis
+from ..checks import check_real
+from ..stabilization import modal_assurance_criterion
+
+__all__ = ["SplitHalves", "split_halves"]
+
+#: z within this of 0 counts as covered (the two-sided 95 % point of the normal).
+Z_95 = 1.959963984540054
+
+
+@dataclass(frozen=True)
+class SplitHalves:
+    """The modes found in both halves, their estimates, σ and z (one row per mode pair).
+
+    ``halves_s`` are the two windows in seconds of the record; ``settings`` the horizons, orders and
+    blocks both halves were identified with; ``unmatched_hz`` the frequencies (Hz) of the modes
+    of each half without a partner.
+    """
+
+    frequency_hz: np.ndarray        #: (n_pairs, 2), Hz
+    frequency_std: np.ndarray       #: (n_pairs, 2), Hz
+    damping_ratio: np.ndarray       #: (n_pairs, 2), fraction
+    damping_std: np.ndarray         #: (n_pairs, 2), fraction
+    mac: np.ndarray                 #: (n_pairs,), MAC of the two shapes
+    halves_s: tuple
+    settings: dict
+    unmatched_hz: tuple
+
+    @property
+    def z_frequency(self) -> np.ndarray:
+        return _z(self.frequency_hz, self.frequency_std)
+
+    @property
+    def z_damping(self) -> np.ndarray:
+        return _z(self.damping_ratio, self.damping_std)
+
+    def summary(self) -> dict:
+        """``n_pairs``; ``rms_z_frequency``, ``rms_z_damping`` (≈ 1 if σ is right); the share of
+        |z| ≤ 1.96, ``within_frequency`` and ``within_damping`` (≈ 0.95); NaN without pairs."""
+        out = {"n_pairs": int(len(self.mac))}
+        for name, z in (("frequency", self.z_frequency), ("damping", self.z_damping)):
+            z = z[np.isfinite(z)]
+            out[f"rms_z_{name}"] = float(np.sqrt(np.mean(z ** 2))) if z.size else float("nan")
+            out[f"within_{name}"] = float(np.mean(np.abs(z) <= Z_95)) if z.size else float("nan")
+        return out
+
+    def to_dataframe(self):
+        """One row per mode pair: f, σ_f, ξ, σ_ξ of each half (suffix _1, _2), z of f and ξ, MAC."""
+        import pandas as pd
+
+        cols = {}
+        for name, v in (("frequency_hz", self.frequency_hz), ("frequency_std", self.frequency_std),
+                        ("damping_ratio", self.damping_ratio), ("damping_std", self.damping_std)):
+            cols[f"{name}_1"], cols[f"{name}_2"] = v[:, 0], v[:, 1]
+        cols.update(z_frequency=self.z_frequency, z_damping=self.z_damping, mac=self.mac)
+        return pd.DataFrame(cols)
+
+    def report(self) -> str:
+        """A Markdown report: the windows, the settings, the table and the summary."""
+        s = self.summary()
+        (a0, a1), (b0, b1) = self.halves_s
+        lines = [f"## Split halves: {a0:g}-{a1:g} s against {b0:g}-{b1:g} s", "",
+                 "Settings of both halves: " + ", ".join(f"{k} {v}" for k, v in self.settings.items()), "",
+                 "| f₁ (Hz) | f₂ (Hz) | σ_f₁, σ_f₂ (Hz) | z_f | ξ₁ (%) | ξ₂ (%) | σ_ξ₁, σ_ξ₂ (%) | z_ξ | MAC |",
+                 "|---|---|---|---|---|---|---|---|---|"]
+        zf, zx = self.z_frequency, self.z_damping
+        for k in range(s["n_pairs"]):
+            f, sf, x, sx = self.frequency_hz[k], self.frequency_std[k], self.damping_ratio[k], self.damping_std[k]
+            lines.append(f"| {f[0]:.4f} | {f[1]:.4f} | {sf[0]:.2g}, {sf[1]:.2g} | {zf[k]:+.2f} | "
+                         f"{100 * x[0]:.2f} | {100 * x[1]:.2f} | {100 * sx[0]:.2g}, {100 * sx[1]:.2g} | "
+                         f"{zx[k]:+.2f} | {self.mac[k]:.3f} |")
+        if s["n_pairs"]:
+            lines += ["", f"{s['n_pairs']} modes in both halves: RMS z {s['rms_z_frequency']:.2f} (f), "
+                          f"{s['rms_z_damping']:.2f} (ξ); within ±1.96: {100 * s['within_frequency']:.0f} % (f), "
+                          f"{100 * s['within_damping']:.0f} % (ξ). If σ is right: RMS ≈ 1, about 95 % within."]
+        else:
+            lines += ["", "No mode was found in both halves (within the frequency difference and MAC asked): "
+                          "nothing to compare."]
+        for k, hz in enumerate(self.unmatched_hz):
+            if len(hz):
+                lines.append(f"Half {k + 1} only: " + ", ".join(f"{v:.4g}" for v in hz) + " Hz.")
+        return "\n".join(lines) + "\n"
+
+
+def _z(values: np.ndarray, stds: np.ndarray) -> np.ndarray:
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return (values[:, 0] - values[:, 1]) / np.sqrt(stds[:, 0] ** 2 + stds[:, 1] ** 2)
+
+
+def split_halves(analysis: Analysis, *, max_frequency_difference: float = 0.02, min_mac: float = 0.8) -> SplitHalves:
+    """Identify the two halves of ``analysis``'s record (within its ``start``/``stop`` window) with
+    the same settings, select the modes of each, pair them and compare (module docstring).
+
+    The first half is identified as ``analysis`` says (automatic ``block_rows``, ``orders`` and
+    ``n_blocks`` where not set, chosen for the half's length); the second with exactly the
+    settings the first used. A mode of one half pairs with the mode of the other nearest in
+    frequency, one to one, when the two frequencies differ by at most
+    ``max_frequency_difference`` (a fraction) and their shapes have MAC ≥ ``min_mac``.
+
+    Raises
+    ------
+    ValueError
+        Settings without the uncertainty, a bad ``max_frequency_difference`` or ``min_mac``, or
+        halves too short for the settings (the error names the half).
+    """
+    if not isinstance(analysis, Analysis):
+        raise TypeError(f"analysis must be a modaluq.analysis.Analysis; got {type(analysis).__name__}")
+    tol = check_real("max_frequency_difference", max_frequency_difference, low=0.0, low_open=True)
+    min_mac = check_real("min_mac", min_mac, low=0.0, high=1.0)
+    if not analysis.settings.uncertainty:
+        raise ValueError("split_halves compares the estimates against their σ: the settings must keep the uncertainty")
+    t0 = analysis.settings.start or 0.0
+    t1 = analysis.settings.stop if analysis.settings.stop is not None else analysis.y.shape[0] / analysis.fs
+    mid = 0.5 * (t0 + t1)
+    runs = []
+    for k, (a, b) in enumerate(((t0, mid), (mid, t1))):
+        half = analysis.with_settings(start=a, stop=b)
+        if runs:  # the second half exactly as the first was identified
+            used = runs[0].result.settings
+            half = half.with_settings(block_rows=used["block_rows"], past_block_rows=used["past_block_rows"],
+                                      orders=used["orders"], n_blocks=used["n_blocks"])
+        try:
+            runs.append(half.run(check_harmonics=False, issue_warnings=False))
+        except ValueError as exc:
+            raise ValueError(f"half {k + 1} ({a:g}-{b:g} s): {exc}") from None
+    s1, s2 = runs[0].selected, runs[1].selected
+    pairs = _pair(s1, s2, tol, min_mac)
+    i1 = np.array([p[0] for p in pairs], int)
+    i2 = np.array([p[1] for p in pairs], int)
+
+    def both(name):
+        return np.column_stack([np.asarray(getattr(s1, name), float)[i1], np.asarray(getattr(s2, name), float)[i2]])
+
+    used = runs[0].result.settings
+    return SplitHalves(
+        frequency_hz=both("frequency_hz"), frequency_std=both("frequency_std"),
+        damping_ratio=both("damping_ratio"), damping_std=both("damping_std"),
+        mac=np.array([float(modal_assurance_criterion(s1.mode_shape[:, a], s2.mode_shape[:, b])[0, 0])
+                      for a, b in pairs]),
+        halves_s=((t0, mid), (mid, t1)),
+        settings={k: used[k] for k in ("block_rows", "past_block_rows", "n_blocks")} | {
+            "orders": f"{min(used['orders'])}-{max(used['orders'])}"},
+        unmatched_hz=(np.delete(np.asarray(s1.frequency_hz, float), i1),
+                      np.delete(np.asarray(s2.frequency_hz, float), i2)))
+
+
+def _pair(s1, s2, tol: float, min_mac: float) -> list:
+    """One-to-one pairs (i, j) of modes of s1 and s2, nearest relative frequency first."""
+    f1, f2 = np.asarray(s1.frequency_hz, float), np.asarray(s2.frequency_hz, float)
+    mac = modal_assurance_criterion(s1.mode_shape, s2.mode_shape) if f1.size and f2.size else None
+    cand = []
+    for i in range(f1.size):
+        for j in range(f2.size):
+            d = abs(f1[i] - f2[j]) / max(f1[i], f2[j])
+            if d <= tol and mac[i, j] >= min_mac:
+                cand.append((d, i, j))
+    used1, used2, out = set(), set(), []
+    for _, i, j in sorted(cand):
+        if i not in used1 and j not in used2:
+            used1.add(i)
+            used2.add(j)
+            out.append((i, j))
+    return sorted(out)

@@ -1,0 +1,103 @@
+"""``modaluq.validation.split_halves`` and ``modaluq validate --split-halves FILE``: the two halves
+of one record identified alike, z = (x₁ − x₂) / √(σ₁² + σ₂²) per mode found in both."""
+
+import numpy as np
+import pytest
+
+import modaluq
+from modaluq.analysis import Analysis
+from modaluq.cli import main
+from modaluq.simulate import simulate
+from modaluq.validation import SplitHalves, split_halves
+
+SETTINGS = modaluq.Settings(block_rows=15, orders=range(2, 31, 2), n_blocks=30)
+
+
+@pytest.fixture(scope="module")
+def record():
+    return simulate(n_samples=40_000, seed=11)
+
+
+def test_the_halves_are_identified_alike_and_z_is_the_difference_over_its_std(record):
+    a = Analysis.from_arrays(record.y, fs=record.fs, settings=SETTINGS)
+    check = split_halves(a)
+    assert isinstance(check, SplitHalves)
+    half = record.y.shape[0] / record.fs / 2
+    assert check.halves_s == ((0.0, half), (half, 2 * half))
+    # independently: each half through Analysis with the same window and settings
+    runs = [a.with_settings(start=s0, stop=s1).run(check_harmonics=False, issue_warnings=False).selected
+            for s0, s1 in check.halves_s]
+    assert check.summary()["n_pairs"] == 6  # the chain's six modes, found in both halves
+    for k in range(6):
+        i = int(np.argmin(abs(runs[0].frequency_hz - check.frequency_hz[k, 0])))
+        j = int(np.argmin(abs(runs[1].frequency_hz - check.frequency_hz[k, 1])))
+        assert check.frequency_hz[k, 0] == runs[0].frequency_hz[i] and check.frequency_hz[k, 1] == runs[1].frequency_hz[j]
+        assert abs(check.frequency_hz[k, 0] / check.frequency_hz[k, 1] - 1) <= 0.02
+        zf = (runs[0].frequency_hz[i] - runs[1].frequency_hz[j]) / np.hypot(runs[0].frequency_std[i],
+                                                                             runs[1].frequency_std[j])
+        zx = (runs[0].damping_ratio[i] - runs[1].damping_ratio[j]) / np.hypot(runs[0].damping_std[i],
+                                                                              runs[1].damping_std[j])
+        assert check.z_frequency[k] == pytest.approx(zf, rel=1e-12)
+        assert check.z_damping[k] == pytest.approx(zx, rel=1e-12)
+    s = check.summary()
+    assert s["rms_z_frequency"] == pytest.approx(np.sqrt(np.mean(check.z_frequency ** 2)))
+    assert s["within_damping"] == pytest.approx(np.mean(abs(check.z_damping) <= 1.959963984540054))
+    table = check.to_dataframe()
+    assert list(table["z_frequency"]) == list(check.z_frequency) and table.shape == (6, 11)
+    assert "6 modes in both halves" in check.report()
+
+
+def test_the_second_half_takes_the_first_halfs_automatic_settings(record):
+    check = split_halves(Analysis.from_arrays(record.y, fs=record.fs))  # block_rows, orders, n_blocks chosen
+    assert set(check.settings) == {"block_rows", "past_block_rows", "n_blocks", "orders"}
+    assert check.summary()["n_pairs"] >= 5
+
+
+def test_pairs_are_one_to_one_within_the_frequency_difference(record):
+    a = Analysis.from_arrays(record.y, fs=record.fs, settings=SETTINGS)
+    tight = split_halves(a, max_frequency_difference=1e-6)
+    assert tight.summary()["n_pairs"] == 0 and np.isnan(tight.summary()["rms_z_frequency"])
+    assert len(tight.unmatched_hz[0]) >= 6 and len(tight.unmatched_hz[1]) >= 6
+    wide = split_halves(a, max_frequency_difference=0.5, min_mac=0.0)
+    assert len(set(map(tuple, wide.frequency_hz.round(12)))) == wide.summary()["n_pairs"]
+    assert len(np.unique(wide.frequency_hz[:, 0])) == len(np.unique(wide.frequency_hz[:, 1])) == len(wide.mac)
+
+
+def test_bad_input_is_named(record):
+    a = Analysis.from_arrays(record.y, fs=record.fs, settings=SETTINGS)
+    with pytest.raises(TypeError, match="analysis must be"):
+        split_halves(record.y)
+    with pytest.raises(ValueError, match="uncertainty"):
+        split_halves(a.with_settings(uncertainty=False))
+    with pytest.raises(ValueError, match="max_frequency_difference"):
+        split_halves(a, max_frequency_difference=0)
+    with pytest.raises(ValueError, match="min_mac"):
+        split_halves(a, min_mac=1.5)
+    short = Analysis.from_arrays(record.y[:1000], fs=record.fs, settings=SETTINGS)
+    with pytest.raises(ValueError, match="half 1"):
+        split_halves(short)
+
+
+def test_cli_split_halves_end_to_end(record, tmp_path, capsys):
+    csv = tmp_path / "rec.csv"
+    np.savetxt(csv, np.column_stack([np.arange(len(record.y)) / record.fs, record.y]), delimiter=",",
+               header="time [s],a,b,c", comments="")
+    out = tmp_path / "check"
+    status = main(["validate", "--split-halves", str(csv), "--block-rows", "15", "--order", *map(str, range(2, 31, 2)),
+                   "--n-blocks", "30", "--out", str(out), "--no-progress"])
+    text, err = capsys.readouterr()
+    assert status == 0, err
+    assert "## Split halves: 0-400 s against 400-800 s" in text and "6 modes in both halves" in text
+    assert (out / "report.md").read_text() == text
+    assert (out / "pairs.csv").read_text().splitlines()[0].startswith("frequency_hz_1,frequency_hz_2")
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--split-halves", "x.csv", "--records", "3"], "--records: option(s) of the simulation"),
+    (["--fs", "10"], "--fs: option(s) of --split-halves FILE"),
+    (["--split-halves", "missing.csv"], "missing.csv"),
+])
+def test_cli_split_halves_options_are_checked(argv, message, capsys):
+    assert main(["validate", *argv]) == 2
+    err = capsys.readouterr().err
+    assert message in err and len(err.strip().splitlines()) == 1
