@@ -23,6 +23,7 @@ void modaluq::python::bind_identify(py::module_& m) {
         .def_readonly("mode_shape_std_real", &Modes::mode_shape_std_real)
         .def_readonly("mode_shape_std_imag", &Modes::mode_shape_std_imag)
         .def_readonly("covariance", &Modes::covariance)
+        .def_readonly("frequency_damping_factor", &Modes::frequency_damping_factor)
         .def_readonly("frequency_damping_correlation", &Modes::frequency_damping_correlation)
         .def_readonly("block_too_short", &Modes::block_too_short)
         .def_readonly("singular_value_gap", &Modes::singular_value_gap)

@@ -21,6 +21,9 @@ void modaluq::python::bind_stabilization(py::module_& m) {
         .value("complete", Linkage::complete)
         .value("average", Linkage::average)
         .value("weighted", Linkage::weighted);
+    py::enum_<ClusterStd>(m, "ClusterStd")
+        .value("median", ClusterStd::median)
+        .value("mean", ClusterStd::mean);
     py::enum_<DropReason>(m, "DropReason")
         .value("too_few_poles", DropReason::too_few_poles)
         .value("frequency_std_above_bandwidth", DropReason::frequency_std_above_bandwidth)
@@ -57,6 +60,7 @@ void modaluq::python::bind_stabilization(py::module_& m) {
         .def_readwrite("noise_coupled", &Poles::noise_coupled)
         .def_readwrite("frequency_damping_correlation", &Poles::frequency_damping_correlation)
         .def_readwrite("block_too_short", &Poles::block_too_short)
+        .def_readwrite("frequency_damping_factor", &Poles::frequency_damping_factor)
         .def_readwrite("orders", &Poles::orders)
         .def_readwrite("has_uncertainty", &Poles::has_uncertainty)
         .def("validate", &Poles::validate);
@@ -95,6 +99,7 @@ void modaluq::python::bind_stabilization(py::module_& m) {
         .def_readwrite("fragment_max_shared", &ClusteringOptions::fragment_max_shared)
         .def_readwrite("statuses", &ClusteringOptions::statuses)
         .def_readwrite("linkage", &ClusteringOptions::linkage)
+        .def_readwrite("cluster_std", &ClusteringOptions::cluster_std)
         .def("validate", &ClusteringOptions::validate);
 
     py::class_<SelectedModes>(m, "SelectedModes")

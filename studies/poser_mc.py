@@ -17,7 +17,9 @@ block_rows=20, orders 2..40, the default n_blocks, then select_modes(), for both
 each setup's own diagram and selection, its σ frozen at its own noise floor; modular: the merged
 diagram, each setup's noise floor frozen, docs/uq-math.md §13.4, or not with ``unfrozen``); f, ξ
 and their σ of each selected mode: median σ over the MC std, and the coverage of ±1.96 σ around
-the true value.
+the true value. The modular merge's selection reports the σ of each cluster's mean (docs/uq-math.md
+§13.10); a second table sets it beside the median of the cluster's σ (``cluster_std="median"``, the
+selection before issue 23's fix) for the same selected values.
 
 With ``diagram auto``: the engineer's call of issue 23, ``frequency_range=(0.5, 11)`` only (the
 automatic block_rows, orders and n_blocks), the modular merge only.
@@ -172,21 +174,29 @@ def run_diagram(seed, kw, io, freeze_noise=True, auto=False):
             r = modaluq.identify_setups(frames, fs=c.fs, references=["L3", "R8"], inputs=["F5"] if io else None,
                                         method=m, freeze_noise=freeze_noise, **(AUTO if auto else DIAGRAM))
             sel = r.select_modes()
+            # the modular merge's selection reports the σ of the cluster's mean (docs/uq-math.md
+            # §13.10); the median of its poles' σ (before issue 23's fix) from the same diagram
+            alt = r.stabilization_diagram().select_modes(cluster_std="median") if m == "modular" else None
             names = list(sel.output_names)
             Phi = c.mode_shape[[c.dofs.index(n) for n in names]]
             kref = np.argmax(np.abs(Phi), axis=0)
             nm, l = len(c.frequency_hz), len(names)
             f = np.full((nm, 4), np.nan)
+            f_alt = np.full((nm, 4), np.nan)
             shape = np.full((nm, 3, l), np.nan + 0j)  # shape, σ Re, σ Im
             for t, f0 in enumerate(c.frequency_hz):
                 i = np.flatnonzero(np.abs(sel.frequency_hz / f0 - 1) < 0.05)
                 if i.size == 1:
                     k = i[0]
                     f[t] = sel.frequency_hz[k], sel.frequency_std[k], sel.damping_ratio[k], sel.damping_std[k]
+                    if alt is not None:
+                        f_alt[t] = alt.frequency_hz[k], alt.frequency_std[k], alt.damping_ratio[k], alt.damping_std[k]
                     th = _theta(f[t, 0], f[t, 1], f[t, 2], f[t, 3], sel.mode_shape[:, k],
                                 sel.mode_covariance[k].ravel(order="F"), kref[t], l)
                     shape[t] = th[4], th[5], th[6]
             out[m] = f
+            if alt is not None:
+                out[m + " median"] = f_alt
             out[m + " shape"] = shape
             out["kref"] = kref
     return out
@@ -235,6 +245,24 @@ def main_diagram(n, configs=None, freeze_noise=True, auto=False):
                   f"{100 * M[4]:.0f} / {100 * Q[4]:.0f} % | {100 * M[5]:.0f} / {100 * Q[5]:.0f} % | "
                   f"{M[6]:.2f} [{M[7]:.2f}, {M[8]:.2f}] | {Q[6]:.2f} [{Q[7]:.2f}, {Q[8]:.2f}] | "
                   f"{np.nanmedian(a) if np.isfinite(a).any() else np.nan:.2f} | {M[1] / Q[1]:.2f} |")
+        print("\nModular σ of the selected modes (same values): the σ of the cluster's mean (default) and the "
+              "median of its poles' σ (before); σ_ξ/MC robust: over 1.4826 × the MAD of ξ\n")
+        print("| mode | σ_f/MC mean / median | σ_ξ/MC mean / median | σ_ξ/MC robust mean / median "
+              "| coverage f mean / median | coverage ξ mean / median |")
+        print("|---|---|---|---|---|---|")
+        for t, (f0, x0) in enumerate(zip(truth.frequency_hz, truth.damping_ratio)):
+            cells = []
+            for key in ("modular", "modular median"):
+                F = np.array([r[key][t] for r in runs])
+                F = F[np.isfinite(F[:, 0])]
+                sf, sx = np.std(F[:, 0], ddof=1), np.std(F[:, 2], ddof=1)
+                mad = 1.4826 * np.median(np.abs(F[:, 2] - np.median(F[:, 2])))
+                cells.append((np.median(F[:, 1]) / sf, np.median(F[:, 3]) / sx, np.median(F[:, 3]) / mad,
+                              np.mean(np.abs(F[:, 0] - f0) <= 1.96 * F[:, 1]),
+                              np.mean(np.abs(F[:, 2] - x0) <= 1.96 * F[:, 3])))
+            a, b = cells
+            print(f"| {t + 1} | {a[0]:.2f} / {b[0]:.2f} | {a[1]:.2f} / {b[1]:.2f} | {a[2]:.2f} / {b[2]:.2f} | "
+                  f"{100 * a[3]:.0f} / {100 * b[3]:.0f} % | {100 * a[4]:.0f} / {100 * b[4]:.0f} % |")
         print(f"CPU time {time.process_time() - t0:.0f} s")
     return results
 

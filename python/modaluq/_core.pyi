@@ -8,7 +8,7 @@ import collections.abc
 import numpy
 import numpy.typing
 import typing
-__all__: list[str] = ['ClusteringOptions', 'CovarianceAccumulator', 'CovarianceAccumulatorState', 'Covariances', 'Diagram', 'DropReason', 'HankelLayout', 'Identification', 'IdentificationWarning', 'IdentifyOptions', 'IndicatorStatistics', 'Linkage', 'Modes', 'NumericalError', 'PoleStatus', 'Poles', 'SelectedModes', 'SetupData', 'SetupsIdentification', 'SlowDecay', 'StabilityCriteria', 'blas_library', 'builds', 'cluster_labels', 'compute_covariances', 'cpu_path', 'eigen_simd', 'eigen_version', 'identify', 'identify_covariances', 'identify_setups', 'mean_phase_deviation', 'modal_assurance', 'modal_assurance_criterion', 'modal_assurance_statistics', 'modal_phase_collinearity', 'modal_phase_collinearity_statistics', 'poles_of', 'select_modes', 'stabilization_diagram', 'uses_blas']
+__all__: list[str] = ['ClusterStd', 'ClusteringOptions', 'CovarianceAccumulator', 'CovarianceAccumulatorState', 'Covariances', 'Diagram', 'DropReason', 'HankelLayout', 'Identification', 'IdentificationWarning', 'IdentifyOptions', 'IndicatorStatistics', 'Linkage', 'Modes', 'NumericalError', 'PoleStatus', 'Poles', 'SelectedModes', 'SetupData', 'SetupsIdentification', 'SlowDecay', 'StabilityCriteria', 'blas_library', 'builds', 'cluster_labels', 'compute_covariances', 'cpu_path', 'eigen_simd', 'eigen_version', 'identify', 'identify_covariances', 'identify_setups', 'mean_phase_deviation', 'modal_assurance', 'modal_assurance_criterion', 'modal_assurance_statistics', 'modal_phase_collinearity', 'modal_phase_collinearity_statistics', 'poles_of', 'select_modes', 'stabilization_diagram', 'uses_blas']
 class NumericalError(ArithmeticError):
     pass
 class HankelLayout:
@@ -229,6 +229,9 @@ class Modes:
         ...
     @property
     def frequency_damping_correlation(self) -> typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 1]"]:
+        ...
+    @property
+    def frequency_damping_factor(self) -> typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, n]"]:
         ...
     @property
     def frequency_hz(self) -> typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 1]"]:
@@ -566,6 +569,51 @@ class Linkage:
     @property
     def value(self) -> int:
         ...
+class ClusterStd:
+    """
+    Members:
+    
+      median
+    
+      mean
+    """
+    __members__: typing.ClassVar[dict[str, ClusterStd]]
+    mean: typing.ClassVar[ClusterStd]
+    median: typing.ClassVar[ClusterStd]
+    @typing.overload
+    def __eq__(self, other: ClusterStd) -> bool:
+        ...
+    @typing.overload
+    def __eq__(self, other: typing.Any) -> bool:
+        ...
+    def __getstate__(self) -> int:
+        ...
+    def __hash__(self) -> int:
+        ...
+    def __index__(self) -> int:
+        ...
+    def __init__(self, value: typing.SupportsInt | typing.SupportsIndex) -> None:
+        ...
+    def __int__(self) -> int:
+        ...
+    @typing.overload
+    def __ne__(self, other: ClusterStd) -> bool:
+        ...
+    @typing.overload
+    def __ne__(self, other: typing.Any) -> bool:
+        ...
+    def __repr__(self) -> str:
+        ...
+    def __setstate__(self, state: typing.SupportsInt | typing.SupportsIndex) -> None:
+        ...
+    def __str__(self) -> str:
+        ...
+    @property
+    def name(self) -> str:
+        ...
+    @property
+    def value(self) -> int:
+        ...
 class DropReason:
     """
     Members:
@@ -734,6 +782,12 @@ class Poles:
     def frequency_damping_correlation(self, arg0: typing.Annotated[numpy.typing.ArrayLike, numpy.float64, "[m, 1]"]) -> None:
         ...
     @property
+    def frequency_damping_factor(self) -> typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, n]"]:
+        ...
+    @frequency_damping_factor.setter
+    def frequency_damping_factor(self, arg0: typing.Annotated[numpy.typing.ArrayLike, numpy.float64, "[m, n]"]) -> None:
+        ...
+    @property
     def frequency_hz(self) -> typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 1]"]:
         ...
     @frequency_hz.setter
@@ -841,6 +895,7 @@ class Diagram:
     def status(self, arg0: collections.abc.Sequence[PoleStatus]) -> None:
         ...
 class ClusteringOptions:
+    cluster_std: ClusterStd
     drop_doublets: bool
     linkage: Linkage
     merge_fragments: bool

@@ -329,7 +329,7 @@ def write_html_report(path, diagram, selected, *, geometry=None, spectrum=None, 
     # plotly.js once, with the first figure: the file opens offline
     parts = ["<h2>Stabilization diagram</h2>" + div(_diagram_figure(go, diagram, selected, spectrum), first=True),
              "<h2>Selected modes</h2>" + _table(selected) +
-             "<p class='note'>σ: analytic (delta-method) standard deviation, median over the cluster; spread: "
+             f"<p class='note'>σ: analytic (delta-method) standard deviation, {selected.std_words}; spread: "
              "standard deviation across the cluster's poles. noise?: every pole of the mode is noise-coupled.</p>"]
     if selected.n_modes > 1:
         parts.append("<h2>MAC matrix</h2>" + div(_mac_figure(go, selected)))

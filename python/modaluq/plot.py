@@ -183,7 +183,7 @@ def plot_stabilization_diagram(diagram, ax=None, *, y=None, spectrum=None, selec
         # Mode numbers on top; a number closer than 2 % of the axis to the previous one is
         # raised a line, so that close modes (a tower's bending pair) stay readable.
         last_x, raised = -np.inf, False
-        # Each selected mode's ±σ_f (median over its cluster) as a shaded band, at least
+        # Each selected mode's ±σ_f (its cluster's, SelectedModes.std_words) as a shaded band, at least
         # MIN_BAND_FRACTION of the axis wide so that a σ far below a pixel is still seen.
         min_half = 0.5 * MIN_BAND_FRACTION * (hi - lo)
         for k, fk in enumerate(selected.frequency_hz):

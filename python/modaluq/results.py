@@ -90,6 +90,10 @@ class Modes:
     mode_shape_std_real: np.ndarray | None = None  #: (n_outputs, n_modes)
     mode_shape_std_imag: np.ndarray | None = None  #: (n_outputs, n_modes)
     covariance: np.ndarray | None = None         #: (n_modes, 2+2l, 2+2l) of [f, xi, Re shape, Im shape]
+    #: (n_modes, 2, n_blocks): per mode the first-order factor rows u_f (Hz) and u_ξ (fraction) of f
+    #: and ξ, one column per block (of every setup, setup by setup, for a merge): ``covariance[:, :2, :2]``
+    #: is ``U Uᵀ``. What the selection's σ of a cluster's mean is formed from (docs/uq-math.md §13.10)
+    frequency_damping_factor: np.ndarray | None = None
     #: (n_modes,) correlation of f and ξ from ``covariance`` (the core's; NaN where a variance is 0)
     frequency_damping_correlation: np.ndarray | None = None
     block_too_short: np.ndarray | None = None    #: (n_modes,) blocks shorter than half the decay time
@@ -112,6 +116,11 @@ class Modes:
         if has_std:
             # Column i of the core's (npar^2 x n_modes) matrix is mode i's symmetric covariance.
             cov = np.ascontiguousarray(m.covariance.T).reshape(-1, npar, npar)
+        factor = None
+        rows = m.frequency_damping_factor
+        if has_std and rows.shape[1] == m.frequency_hz.size:
+            # column i of the core's (2 n_b x n_modes) matrix is [u_f; u_xi] of mode i
+            factor = rows.T.reshape(rows.shape[1], 2, rows.shape[0] // 2)
         return cls(
             order=int(m.order),
             frequency_hz=m.frequency_hz,
@@ -124,6 +133,7 @@ class Modes:
             mode_shape_std_real=m.mode_shape_std_real if has_std else None,
             mode_shape_std_imag=m.mode_shape_std_imag if has_std else None,
             covariance=cov,
+            frequency_damping_factor=factor,
             frequency_damping_correlation=m.frequency_damping_correlation if has_std else None,
             block_too_short=m.block_too_short if has_std else None,
             singular_value_gap=float(m.singular_value_gap),

@@ -5,8 +5,9 @@ linkage) on the distance ``|f_i - f_j| / max(f_i, f_j) + (1 - MAC_ij)``, cut at
 ``distance_threshold`` (:class:`~modaluq.ClusteringSettings`); clusters with fewer than
 ``min_cluster_size`` members, or whose frequency is less certain than the half-power bandwidth
 of the peak they claim, are dropped (and listed with the reason), and each remaining cluster is
-reported at one representative pole, with the median analytic standard deviation of its
-reliable poles next to the spread of its members.
+reported at one representative pole, with the analytic standard deviation of its reliable
+poles (their median for one record, the σ of their mean for a multi-setup merge:
+``ClusteringSettings.cluster_std``) next to the spread of its members.
 
 The clustering runs in the C++ core (``cpp/include/modaluq/selection.hpp``); this module
 translates its result into :class:`SelectedModes`. The core says why a cluster was dropped
@@ -26,7 +27,19 @@ from . import _core
 from .indicators import mac_matrix, mean_phase_deviation, modal_phase_collinearity, shape_covariance
 from .settings import ClusteringSettings
 
-__all__ = ["DropReason", "SelectedModes", "dropped_reason_text", "select_modes"]
+__all__ = ["DropReason", "SelectedModes", "default_cluster_std", "dropped_reason_text", "select_modes"]
+
+#: ``ClusteringSettings.cluster_std`` in words, for tables and exports
+CLUSTER_STD_WORDS = {"median": "median over the cluster", "mean": "of the mean over the cluster"}
+
+
+def default_cluster_std(diagram) -> str:
+    """``ClusteringSettings.cluster_std`` when it is None, for the poles of ``diagram``: ``"mean"``
+    for a multi-setup merge (:func:`modaluq.identify_setups`, whose ``Result.settings`` lists the
+    setups), whose poles decorrelate across orders (docs/uq-math.md §13.10), else ``"median"``
+    (one record, the core's default)."""
+    settings = getattr(diagram, "result_settings", None)
+    return "mean" if isinstance(settings, dict) and settings.get("setups") else "median"
 
 
 class DropReason(str, enum.Enum):
@@ -86,17 +99,21 @@ class SelectedModes:
     """Physical modes chosen automatically from a :class:`Diagram`, sorted by frequency.
 
     Each mode is one cluster of poles. Its ``frequency_hz``, ``damping_ratio``, ``mode_shape``
-    and their ``*_std`` are those of one **representative** pole (analytic, delta-method σ at
-    ``representative_order``); the ``*_spread`` fields are the sample standard deviations
-    (ddof=1) across the cluster's members, a measure of the order-to-order scatter shown beside
-    the analytic σ (0 for a single member).
+    and the shape's σ are those of one **representative** pole (analytic, delta-method σ at
+    ``representative_order``); ``frequency_std`` and ``damping_std`` are the cluster's
+    (``settings.cluster_std``: the median of its reliable poles' σ, or the σ of their mean);
+    the ``*_spread`` fields are the sample standard deviations (ddof=1) across the cluster's
+    members, a measure of the order-to-order scatter shown beside the analytic σ (0 for a
+    single member).
     """
 
     frequency_hz: np.ndarray           #: (n_modes,) Hz
     damping_ratio: np.ndarray          #: (n_modes,) fraction
     mode_shape: np.ndarray             #: (n_outputs, n_modes) complex, largest component 1
-    frequency_std: np.ndarray          #: (n_modes,) Hz, analytic (NaN without uncertainty)
-    damping_std: np.ndarray            #: (n_modes,) fraction, analytic
+    #: (n_modes,) Hz, analytic: over the cluster's reliable poles, their median σ or the σ of their
+    #: mean (``settings.cluster_std``; NaN without uncertainty)
+    frequency_std: np.ndarray
+    damping_std: np.ndarray            #: (n_modes,) fraction, analytic, as ``frequency_std``
     mode_shape_std_real: np.ndarray    #: (n_outputs, n_modes)
     mode_shape_std_imag: np.ndarray    #: (n_outputs, n_modes)
     frequency_spread: np.ndarray       #: (n_modes,) Hz, std across the cluster
@@ -137,8 +154,9 @@ class SelectedModes:
     dropped_twin_mac: np.ndarray = field(default_factory=lambda: np.zeros(0))
     #: the limit on σ_f / (f ξ) applied (NaN: no such test, or no uncertainty)
     max_frequency_std_per_bandwidth: float = float("nan")
-    #: (n_modes,) correlation of f and ξ of the representative pole (NaN without uncertainty): with
-    #: the std of that pole, the covariance of [f, ξ]
+    #: (n_modes,) correlation of f and ξ (NaN without uncertainty): with ``frequency_std`` and
+    #: ``damping_std``, the covariance of [f, ξ]. That of the representative pole, or with
+    #: ``settings.cluster_std == "mean"`` that of the members' mean (from the same factor rows)
     frequency_damping_correlation: np.ndarray = field(default_factory=lambda: np.zeros(0))
     #: (n_modes,) bool, the blocks are shorter than half the representative pole's decay time
     #: 1/(2π f ξ) (the core's ``block_too_short``): its σ are less reliable
@@ -149,7 +167,10 @@ class SelectedModes:
     #: simulated chain's 1.93 Hz mode on 20,000 samples); tables mark it, exports carry the flag.
     noise_coupled: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
     #: (n_modes, 2+2l, 2+2l) covariance of [f, ξ, Re shape, Im shape] of each representative pole
-    #: (``Diagram.pole_covariance``), or None without uncertainty
+    #: (``Diagram.pole_covariance``), or None without uncertainty. With ``settings.cluster_std ==
+    #: "mean"`` its f and ξ entries are the mode's: the [f, ξ] block from ``frequency_std``,
+    #: ``damping_std`` and ``frequency_damping_correlation``, and their covariance with the shape
+    #: the representative's correlation at those σ (the shape's own factor rows are not kept).
     mode_covariance: np.ndarray | None = None
     #: (n_modes,) modal phase collinearity of each shape (1: real, 0: circular) and its σ
     #: (second order, :mod:`modaluq.indicators`; NaN without ``mode_covariance``)
@@ -242,11 +263,16 @@ class SelectedModes:
             lines.append(self.NOISE_COUPLED_LEGEND)
         return "\n".join(lines)
 
+    @property
+    def std_words(self) -> str:
+        """How ``frequency_std`` and ``damping_std`` were formed, in words ("median over the cluster")."""
+        return CLUSTER_STD_WORDS.get(self.settings.cluster_std, CLUSTER_STD_WORDS["median"])
+
     def __str__(self) -> str:
-        s = f"{self.n_modes} modes (std: analytic, median over the cluster; spread: across the cluster)\n"
+        s = f"{self.n_modes} modes (std: analytic, {self.std_words}; spread: across the cluster)\n"
         if self.low_signal_to_noise:
-            s = f"{self.n_modes} modes ({self.LOW_SIGNAL_TO_NOISE_HEADING}; std: analytic, median over the " \
-                "cluster; spread: across the cluster)\n"
+            s = f"{self.n_modes} modes ({self.LOW_SIGNAL_TO_NOISE_HEADING}; std: analytic, {self.std_words}; " \
+                "spread: across the cluster)\n"
         s += self.table()
         if self.dropped_n_poles.size:
             # counted by the core's code of each
@@ -323,9 +349,12 @@ def select_modes(diagram, settings: ClusteringSettings | None = None, **kwargs) 
        among the members at orders that do **not** cut close singular values (whose σ are
        meaningful), or among all members when every member's order does; ties go to the higher
        order. Its frequency, damping ratio and shape are reported; the ``frequency_std`` and
-       ``damping_std`` reported are the **median over the cluster's reliable poles** (not at
-       a close cut, not noise-coupled), so that they do not depend on the order the mode is
-       read at; the ``*_spread`` beside them is how much the estimate moves with the order.
+       ``damping_std`` reported are the cluster's, from its **reliable poles** (not at a close
+       cut, not noise-coupled), so that they do not depend on the order the mode is read at:
+       the median of their σ (``settings.cluster_std="median"``, one record's default) or the σ
+       of their mean (``"mean"``, a multi-setup merge's default: its poles decorrelate across
+       orders and the representative scatters like their mean, docs/uq-math.md §13.10); the
+       ``*_spread`` beside them is how much the estimate moves with the order.
     7. a mode every member of which is noise-coupled is flagged (:attr:`SelectedModes.noise_coupled`,
        from ``Diagram.noise_coupled`` of its members), not dropped: the selection does not change.
 
@@ -337,7 +366,9 @@ def select_modes(diagram, settings: ClusteringSettings | None = None, **kwargs) 
     diagram : Diagram
         From :func:`stabilization_diagram`.
     settings : ClusteringSettings, optional
-        Or its fields as keyword arguments (``distance_threshold=0.03`` ...).
+        Or its fields as keyword arguments (``distance_threshold=0.03`` ...). Its
+        ``cluster_std=None`` (default) becomes :func:`default_cluster_std` of the diagram, the
+        value the returned ``settings`` hold.
 
     Returns
     -------
@@ -356,6 +387,8 @@ def select_modes(diagram, settings: ClusteringSettings | None = None, **kwargs) 
         raise TypeError("pass either settings= or its fields as keyword arguments, not both")
     elif not isinstance(settings, ClusteringSettings):
         raise TypeError(f"settings must be a ClusteringSettings; got {type(settings).__name__}")
+    if settings.cluster_std is None:
+        settings = dataclasses.replace(settings, cluster_std=default_cluster_std(diagram))
 
     sel = _core.select_modes(core_diagram, settings.to_core())
     modes = SelectedModes(
@@ -402,6 +435,8 @@ def _shape_indicators(diagram, modes: SelectedModes) -> dict:
         found = [pole_covariance(int(p)) for p in modes.representative_pole]
         if all(c is not None for c in found):
             covs = np.stack(found)
+            if modes.settings.cluster_std == "mean":
+                covs = _with_cluster_std(covs, modes)
     mpc, mpd = [], []
     for k in range(modes.n_modes):
         shape_cov = None if covs is None else shape_covariance(covs[k])
@@ -409,3 +444,20 @@ def _shape_indicators(diagram, modes: SelectedModes) -> dict:
         mpd.append(mean_phase_deviation(modes.mode_shape[:, k], shape_cov))
     return dict(mode_covariance=covs, mpc=np.array([m.value for m in mpc]), mpc_std=np.array([m.std for m in mpc]),
                 mpd_deg=np.array([m.value for m in mpd]), mpd_std_deg=np.array([m.std for m in mpd]))
+
+
+def _with_cluster_std(covs: np.ndarray, modes: SelectedModes) -> np.ndarray:
+    """The representatives' covariances ``covs`` with their f and ξ entries the modes': the [f, ξ]
+    block from ``frequency_std``, ``damping_std`` and ``frequency_damping_correlation``, and the
+    f and ξ rows against the shape scaled from the representative's σ to the mode's (the
+    representative's correlations with its shape kept)."""
+    out = covs.copy()
+    for k in range(modes.n_modes):
+        sf, sx, rho = modes.frequency_std[k], modes.damping_std[k], modes.frequency_damping_correlation[k]
+        own = np.sqrt(np.clip(np.diag(covs[k])[:2], 0.0, None))
+        scale = np.divide([sf, sx], own, out=np.zeros(2), where=own > 0)
+        out[k, :2, 2:] *= scale[:, None]
+        out[k, 2:, :2] *= scale[None, :]
+        out[k, 0, 0], out[k, 1, 1] = sf * sf, sx * sx
+        out[k, 0, 1] = out[k, 1, 0] = (rho if np.isfinite(rho) else 0.0) * sf * sx
+    return out

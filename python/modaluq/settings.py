@@ -86,6 +86,9 @@ _CODECS = {
     "references": _Codec(lambda v: tuple(v) or None, lambda v: list(v or ())),
     "statuses": _Codec(lambda v: tuple(STATUS_OF_CORE[s] for s in v), lambda v: [CORE_OF_STATUS[s] for s in v]),
     "linkage": _Codec(lambda v: v.name, lambda v: getattr(_core.Linkage, v)),
+    # None (Python's default: the identification's own, resolved by select_modes) crosses as the
+    # core's default, one record's "median"
+    "cluster_std": _Codec(lambda v: v.name, lambda v: getattr(_core.ClusterStd, v or "median")),
 }
 
 
@@ -424,6 +427,18 @@ class ClusteringSettings:
         Linkage method (the clustering is the core's, selection.hpp; it equals
         :func:`scipy.cluster.hierarchy.linkage` + ``fcluster``): default ``"average"``;
         ``"single"`` chains neighbouring poles, ``"complete"`` is stricter, ``"weighted"`` is WPGMA.
+    cluster_std : {None, "median", "mean"}
+        Which σ_f and σ_ξ each selected mode reports; the selected value is the representative
+        pole's either way. ``"median"``: the median of the σ of the cluster's reliable poles (not
+        at a close singular-value cut, not noise-coupled), one order's σ. ``"mean"``: the σ of the
+        mean of those poles' estimates, ``‖(1/K) Σ_m u_m‖`` from each pole's first-order factor
+        rows (``Modes.frequency_damping_factor``; docs/uq-math.md §13.10), which the selected
+        value scatters like when the poles of one run decorrelate across orders; the median
+        where the poles carry no factor rows. None (default): the identification's own,
+        ``"mean"`` for a multi-setup merge (:func:`modaluq.identify_setups`, whose merged poles
+        decorrelate across orders: the median was 1.04–1.4× the scatter of the selected value,
+        issue 23) and ``"median"`` for one record (the core's default). The cluster tests
+        (``max_frequency_std_per_bandwidth``, ``merge_fragments``) use the poles' own σ either way.
     """
 
     distance_threshold: float = _CLUSTERING["distance_threshold"]
@@ -440,6 +455,8 @@ class ClusteringSettings:
     fragment_max_shared: float = _CLUSTERING["fragment_max_shared"]
     statuses: tuple = _CLUSTERING["statuses"]
     linkage: str = _CLUSTERING["linkage"]
+    #: None: the identification's own (``"mean"`` for a multi-setup merge, else the core's ``"median"``)
+    cluster_std: str | None = None
 
     def __post_init__(self):
         check_real("distance_threshold", self.distance_threshold, low=0, low_open=True)
@@ -466,6 +483,10 @@ class ClusteringSettings:
             raise ValueError("statuses must not be empty")
         if self.linkage not in ("single", "complete", "average", "weighted"):
             raise ValueError(f"linkage must be 'single', 'complete', 'average' or 'weighted'; got {self.linkage!r}")
+        if self.cluster_std is not None and not isinstance(self.cluster_std, str):
+            raise TypeError(f"cluster_std must be None, 'median' or 'mean'; got {type(self.cluster_std).__name__}")
+        if self.cluster_std not in (None, "median", "mean"):
+            raise ValueError(f"cluster_std must be None, 'median' or 'mean'; got {self.cluster_std!r}")
 
     def to_dict(self) -> dict:
         return {f.name: _exported(getattr(self, f.name)) for f in fields(self)}

@@ -134,6 +134,10 @@ class Diagram:
     #: can reject poles by them); empty when unknown (a Diagram constructed by hand)
     mpc: np.ndarray = field(default_factory=lambda: np.zeros(0))
     mpd_deg: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    #: (n_poles, 2, n_blocks): each pole's first-order factor rows of f (Hz) and ξ
+    #: (``Modes.frequency_damping_factor``), from which the selection forms the σ of a cluster's
+    #: mean (``ClusteringSettings.cluster_std``); empty (0 poles) when unknown
+    frequency_damping_factor: np.ndarray = field(default_factory=lambda: np.zeros((0, 2, 0)))
 
     @property
     def n_poles(self) -> int:
@@ -316,12 +320,20 @@ def stabilization_diagram(result, criteria: StabilityCriteria | None = None, *,
         fs=float(result.fs), output_names=names, criteria=criteria, has_uncertainty=has_std,
         result_settings=dict(result.settings),
         frequency_damping_correlation=p.frequency_damping_correlation, block_too_short=p.block_too_short,
+        frequency_damping_factor=_factor_per_pole(p.frequency_damping_factor, n_poles),
         n_samples=int(getattr(result, "n_samples", 0)),
         low_signal_to_noise=bool(getattr(result, "low_signal_to_noise", False)),
     )
     object.__setattr__(diagram, "_core_diagram", d)
     object.__setattr__(diagram, "_modes", tuple(result.modes))
     return diagram
+
+
+def _factor_per_pole(factor: np.ndarray, n_poles: int) -> np.ndarray:
+    """The core's (2 n_b x n_poles) factor rows as (n_poles, 2, n_b) (a view), (0, 2, 0) when absent."""
+    if factor.shape[1] != n_poles or n_poles == 0:
+        return np.zeros((0, 2, 0))
+    return factor.T.reshape(n_poles, 2, -1)
 
 
 def _poles_of_modes(result, has_std: bool):
@@ -365,6 +377,10 @@ def _poles_of_modes(result, has_std: bool):
             p.frequency_damping_correlation = per_pole(rho)
         if all(b is not None for b in slow):
             p.block_too_short = per_pole(slow, bool)
+        factors = [getattr(m, "frequency_damping_factor", None) for m in modes]
+        if modes and all(u is not None for u in factors) and len({u.shape[2] for u in factors}) == 1:
+            # (2 n_b x n_poles), column i [u_f; u_xi] of pole i, as poles_of stacks Modes::frequency_damping_factor
+            p.frequency_damping_factor = np.concatenate([u.reshape(u.shape[0], -1) for u in factors]).T
     p.orders = [int(m.order) for m in result.modes]
     p.has_uncertainty = bool(has_std)
     return p

@@ -211,6 +211,43 @@ TEST_CASE("each mode's f-xi correlation comes from its covariance") {
     const auto plain = modaluq::poles_of(modaluq::identify(s.y, s.u, options(s.fs, 5, 6, {4}, false)));
     CHECK(plain.frequency_damping_correlation.size() == plain.size());
     CHECK(plain.frequency_damping_correlation.array().isNaN().all());
+    CHECK(plain.frequency_damping_factor.size() == 0);  // no factor rows: the selection's median
+}
+
+TEST_CASE("each mode's factor rows of f and xi reproduce its covariance's [f, xi] block") {
+    const Sim s = simulate(3, {0, 1, 2}, 6000, 21, true, 0.2, 0.05);
+    for (bool freeze : {false, true}) {
+        CAPTURE(freeze);
+        auto o = options(s.fs, 5, 6, {2, 4, 6, 8, 10}, true);
+        o.freeze_noise = freeze;
+        const auto id = modaluq::identify(s.y, s.u, o);
+        const Index nb = id.n_blocks;
+        for (const auto& m : id.modes) {
+            REQUIRE(m.frequency_damping_factor.rows() == 2 * nb);
+            REQUIRE(m.frequency_damping_factor.cols() == m.n_modes());
+            const Index np = 2 + 2 * m.mode_shape.rows();
+            for (Index i = 0; i < m.n_modes(); ++i) {
+                const Eigen::Map<const MatrixXd> cov(m.covariance.col(i).data(), np, np);
+                MatrixXd u(2, nb);
+                u.row(0) = m.frequency_damping_factor.col(i).head(nb).transpose();
+                u.row(1) = m.frequency_damping_factor.col(i).tail(nb).transpose();
+                const MatrixXd uut = u * u.transpose();
+                const double scale = std::sqrt(cov(0, 0) * cov(1, 1));
+                CHECK((uut - cov.topLeftCorner(2, 2)).cwiseAbs().maxCoeff() <= 1e-12 * scale);
+                CHECK(u.row(0).norm() == doctest::Approx(m.frequency_std(i)).epsilon(1e-12));
+                CHECK(u.row(1).norm() == doctest::Approx(m.damping_std(i)).epsilon(1e-12));
+            }
+        }
+        // the flattened poles carry them, column by column
+        const modaluq::Poles p = modaluq::poles_of(id);
+        REQUIRE(p.frequency_damping_factor.rows() == 2 * nb);
+        REQUIRE(p.frequency_damping_factor.cols() == p.size());
+        Index at = 0;
+        for (const auto& m : id.modes)
+            for (Index i = 0; i < m.n_modes(); ++i, ++at)
+                CHECK(p.frequency_damping_factor.col(at) == m.frequency_damping_factor.col(i));
+        p.validate();
+    }
 }
 
 }  // namespace test_identify

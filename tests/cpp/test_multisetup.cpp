@@ -196,7 +196,34 @@ TEST_CASE("a one-setup campaign equals identify, unfrozen and frozen above the n
             CHECK(rel(a.frequency_std, b.frequency_std) < 1e-8);
             CHECK(rel(a.damping_std, b.damping_std) < 1e-8);
             CHECK(rel(a.covariance, b.covariance) < 1e-8);
+            CHECK(rel(a.frequency_damping_factor, b.frequency_damping_factor) < 1e-8);
         }
+    }
+}
+
+TEST_CASE("each merged pole's factor rows of f and xi reproduce its covariance's [f, xi] block") {
+    for (bool io : {false, true}) {
+        CAPTURE(io);
+        const Campaign c = make_campaign(io);
+        const auto id = modaluq::identify_setups(c.setups, c.options);
+        const Index nb = id.n_blocks;  // every setup's blocks, setup by setup
+        CHECK(nb == mc::n_blocks * mc::n_setups);
+        for (const auto& m : id.modes) {
+            REQUIRE(m.frequency_damping_factor.rows() == 2 * nb);
+            REQUIRE(m.frequency_damping_factor.cols() == m.n_modes());
+            const Index np = 2 + 2 * mc::n_global;
+            for (Index i = 0; i < m.n_modes(); ++i) {
+                const Eigen::Map<const MatrixXd> cov(m.covariance.col(i).data(), np, np);
+                MatrixXd u(2, nb);
+                u.row(0) = m.frequency_damping_factor.col(i).head(nb).transpose();
+                u.row(1) = m.frequency_damping_factor.col(i).tail(nb).transpose();
+                const MatrixXd uut = u * u.transpose();
+                CHECK((uut - cov.topLeftCorner(2, 2)).cwiseAbs().maxCoeff() <= 1e-12 * std::sqrt(cov(0, 0) * cov(1, 1)));
+            }
+        }
+        const modaluq::Poles p = modaluq::poles_of(id);
+        CHECK(p.frequency_damping_factor.rows() == 2 * nb);
+        CHECK(p.frequency_damping_factor.cols() == p.size());
     }
 }
 

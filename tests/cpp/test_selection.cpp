@@ -269,4 +269,91 @@ TEST_CASE("selection: each mode carries its representative pole's f-xi correlati
     CHECK_THROWS_WITH_AS(d.poles.validate(), doctest::Contains("block_too_short"), modaluq::invalid_argument);
 }
 
+TEST_CASE("selection: cluster_std mean reports the norm of the mean of the reliable members' factor rows") {
+    std::map<Index, std::vector<P>> by_order;
+    for (Index n = 2; n <= 24; n += 2) by_order[n] = {{5.0 + 1e-4 * double(n % 5), 0.02, 0}, {12.0, 0.01, 1}};
+    modaluq::Diagram d = all_stable(by_order);
+    modaluq::Poles& poles = d.poles;
+    const Index n = d.size(), nb = 7;
+    // known factor rows: column i is [u_f; u_xi] of pole i; each pole's std their norms, as identify gives them
+    std::mt19937_64 rng(5);
+    std::normal_distribution<double> N(0.0, 1.0);
+    poles.frequency_damping_factor.resize(2 * nb, n);
+    for (Index i = 0; i < n; ++i) {
+        for (Index r = 0; r < 2 * nb; ++r) poles.frequency_damping_factor(r, i) = N(rng) * (r < nb ? 1e-3 : 1e-4);
+        poles.frequency_std(i) = poles.frequency_damping_factor.col(i).head(nb).norm();
+        poles.damping_std(i) = poles.frequency_damping_factor.col(i).tail(nb).norm();
+    }
+    // one member of the 5 Hz mode at a close cut, one noise-coupled: neither gives the sigma
+    const Index close = find(d, 10, 5.0), coupled = find(d, 16, 5.0 + 1e-4);
+    poles.close_singular_values(close) = true;
+    poles.noise_coupled(coupled) = true;
+
+    modaluq::ClusteringOptions median, mean;
+    CHECK(median.cluster_std == modaluq::ClusterStd::median);  // the default: one record's selection
+    mean.cluster_std = modaluq::ClusterStd::mean;
+    const auto a = modaluq::select_modes(d, median), b = modaluq::select_modes(d, mean);
+    REQUIRE(a.n_modes() == 2);
+    REQUIRE(b.n_modes() == 2);
+    for (Index k = 0; k < 2; ++k) {
+        CAPTURE(k);
+        // the clusters, the representative and its value do not depend on the option
+        CHECK(a.members[std::size_t(k)] == b.members[std::size_t(k)]);
+        CHECK(a.representative_pole(k) == b.representative_pole(k));
+        CHECK(a.frequency_hz(k) == b.frequency_hz(k));
+        CHECK(a.damping_ratio(k) == b.damping_ratio(k));
+        CHECK(a.frequency_std_per_bandwidth(k) == b.frequency_std_per_bandwidth(k));
+        // the mean of the rows of the reliable members, formed here
+        Eigen::VectorXd u = Eigen::VectorXd::Zero(2 * nb);
+        std::vector<double> sf;
+        Index used = 0;
+        for (Index i : b.members[std::size_t(k)]) {
+            if (poles.close_singular_values(i) || poles.noise_coupled(i)) continue;
+            u += poles.frequency_damping_factor.col(i);
+            sf.push_back(poles.frequency_std(i));
+            ++used;
+        }
+        u /= double(used);
+        CHECK(used == Index(b.members[std::size_t(k)].size()) - (k == 0 ? 2 : 0));
+        const double want_f = u.head(nb).norm(), want_xi = u.tail(nb).norm();
+        CHECK(b.frequency_std(k) == doctest::Approx(want_f).epsilon(1e-13));
+        CHECK(b.damping_std(k) == doctest::Approx(want_xi).epsilon(1e-13));
+        CHECK(b.frequency_damping_correlation(k) ==
+              doctest::Approx(u.head(nb).dot(u.tail(nb)) / (want_f * want_xi)).epsilon(1e-12));
+        // independent rows: the mean's sigma is about 1/sqrt(K) of one pole's, below the median
+        CHECK(b.frequency_std(k) < 0.6 * a.frequency_std(k));
+        std::sort(sf.begin(), sf.end());
+        CHECK(a.frequency_std(k) == doctest::Approx(sf.size() % 2 ? sf[sf.size() / 2]
+                                                                  : 0.5 * (sf[sf.size() / 2 - 1] + sf[sf.size() / 2])));
+    }
+    // the flagged members would change it: they are left out, not merely rare
+    {
+        Eigen::VectorXd all = Eigen::VectorXd::Zero(2 * nb);
+        for (Index i : b.members[0]) all += poles.frequency_damping_factor.col(i);
+        all /= double(b.members[0].size());
+        CHECK(std::abs(all.head(nb).norm() - b.frequency_std(0)) > 1e-6 * b.frequency_std(0));
+    }
+    // identical rows (members perfectly correlated): the mean's sigma is each pole's
+    modaluq::Diagram same = d;
+    for (Index i = 0; i < n; ++i) {
+        same.poles.frequency_damping_factor.col(i) = poles.frequency_damping_factor.col(0);
+        same.poles.frequency_std(i) = poles.frequency_std(0);
+        same.poles.damping_std(i) = poles.damping_std(0);
+    }
+    const auto c = modaluq::select_modes(same, mean);
+    CHECK(c.frequency_std(0) == doctest::Approx(poles.frequency_std(0)).epsilon(1e-14));
+    CHECK(c.damping_std(1) == doctest::Approx(poles.damping_std(0)).epsilon(1e-14));
+    // poles without factor rows (may be empty, as frequency_damping_correlation): the median
+    d.poles.frequency_damping_factor.resize(0, 0);
+    const auto e = modaluq::select_modes(d, mean);
+    CHECK(e.frequency_std == a.frequency_std);
+    CHECK(e.damping_std == a.damping_std);
+    // rows for some poles only: refused
+    d.poles.frequency_damping_factor.resize(2 * nb, 3);
+    CHECK_THROWS_WITH_AS(d.poles.validate(), doctest::Contains("frequency_damping_factor"), modaluq::invalid_argument);
+    d.poles.frequency_damping_factor.resize(2 * nb + 1, n);  // not two rows of n_b
+    CHECK_THROWS_WITH_AS(d.poles.validate(), doctest::Contains("frequency_damping_factor"), modaluq::invalid_argument);
+    CHECK(std::string(modaluq::to_string(modaluq::ClusterStd::mean)) == "mean");
+}
+
 }  // namespace test_selection

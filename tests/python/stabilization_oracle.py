@@ -7,6 +7,7 @@ nearest-neighbour-chain clustering is checked against a different implementation
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -109,6 +110,9 @@ def stabilization_diagram_reference(result, criteria: StabilityCriteria | None =
     sxi = np.concatenate(cols["sxi"])
     close = np.concatenate(cols["close"])
     coupled = np.concatenate(cols["coupled"])
+    # each pole's factor rows [u_f, u_xi] (n_poles, 2, n_b), when every order with poles has them
+    rows = [m.frequency_damping_factor for m in result.modes if m.n_modes]
+    factor = (np.concatenate(rows) if rows and all(u is not None for u in rows) else np.zeros((0, 2, 0)))
     shape = np.concatenate(shapes, axis=1)
     n_poles = f.size
 
@@ -194,6 +198,7 @@ def stabilization_diagram_reference(result, criteria: StabilityCriteria | None =
         frequency_change=df, damping_change=dxi, mac=mac, frequency_change_std=dz,
         close_singular_values=close, noise_coupled=coupled, orders=orders, fs=float(result.fs), output_names=names,
         criteria=c, has_uncertainty=has_std, result_settings=dict(result.settings),
+        frequency_damping_factor=factor,
     )
 
 
@@ -287,6 +292,10 @@ def select_modes_reference(diagram: Diagram, settings: ClusteringSettings | None
     elif not isinstance(settings, ClusteringSettings):
         raise TypeError(f"settings must be a ClusteringSettings; got {type(settings).__name__}")
 
+    # None: the mean for the diagram of a multi-setup merge (its settings list the setups)
+    cluster_std = settings.cluster_std or ("mean" if diagram.result_settings.get("setups") else "median")
+    settings = dataclasses.replace(settings, cluster_std=cluster_std)
+    factor = diagram.frequency_damping_factor
     in_set = np.zeros(diagram.n_poles, dtype=bool)
     for s in settings.statuses:
         in_set |= diagram.is_status(s)
@@ -361,6 +370,7 @@ def select_modes_reference(diagram: Diagram, settings: ClusteringSettings | None
     min_mac = np.zeros(n_modes)
     sf_med = np.full(n_modes, np.nan)
     sxi_med = np.full(n_modes, np.nan)
+    rho = np.full(n_modes, np.nan)
     mode_of_pole = np.full(diagram.n_poles, -1, dtype=np.int64)
     for k, members in enumerate(kept):
         mode_of_pole[members] = k
@@ -385,11 +395,19 @@ def select_modes_reference(diagram: Diagram, settings: ClusteringSettings | None
         sc_xi = scale(diagram.damping_std, xi_spread[k])
         dist = ((f[candidates] - med) / sc_f) ** 2 + ((xi[candidates] - np.median(xi[members])) / sc_xi) ** 2
         rep[k] = candidates[np.flatnonzero(dist == dist.min())[-1]]  # ties -> the higher order
-        if reliable.size:
-            sf_med[k] = np.median(diagram.frequency_std[reliable])
-            sxi_med[k] = np.median(diagram.damping_std[reliable])
+        if reliable.size and cluster_std == "mean" and factor.shape[0] == diagram.n_poles:
+            # the sigma of the reliable poles' mean: its factor rows are the mean of theirs
+            u = factor[reliable].mean(axis=0)
+            sf_med[k], sxi_med[k] = np.linalg.norm(u[0]), np.linalg.norm(u[1])
+            rho[k] = u[0] @ u[1] / (sf_med[k] * sxi_med[k]) if sf_med[k] > 0 and sxi_med[k] > 0 else np.nan
         else:
-            sf_med[k], sxi_med[k] = diagram.frequency_std[rep[k]], diagram.damping_std[rep[k]]
+            if reliable.size:
+                sf_med[k] = np.median(diagram.frequency_std[reliable])
+                sxi_med[k] = np.median(diagram.damping_std[reliable])
+            else:
+                sf_med[k], sxi_med[k] = diagram.frequency_std[rep[k]], diagram.damping_std[rep[k]]
+            if diagram.frequency_damping_correlation.size == diagram.n_poles:
+                rho[k] = diagram.frequency_damping_correlation[rep[k]]
         ref = int(np.argmax(np.abs(shape[:, rep[k]])))
         aligned = shape[:, members] / shape[ref, members][None, :]
         sh_spread_r[:, k] = np.std(aligned.real, axis=1, ddof=ddof)
@@ -417,5 +435,5 @@ def select_modes_reference(diagram: Diagram, settings: ClusteringSettings | None
         frequency_std_per_bandwidth=np.array([std_per_bandwidth(m) if diagram.has_uncertainty else np.nan
                                               for m in kept]),
         min_cluster_size=int(smallest), output_names=diagram.output_names, settings=settings,
-        has_uncertainty=diagram.has_uncertainty,
+        has_uncertainty=diagram.has_uncertainty, frequency_damping_correlation=rho,
     )

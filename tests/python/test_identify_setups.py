@@ -73,6 +73,7 @@ def test_refusals(campaign):
 # --------------------------------------------------------------------------- recordings, files, campaigns
 
 SMALL = dict(block_rows=10, orders=[12], n_blocks=12)
+SMALL_DIAGRAM = dict(block_rows=10, orders=list(range(2, 21, 2)), n_blocks=12)
 
 
 def _recordings(camp, io=False):
@@ -162,3 +163,93 @@ def test_a_campaign_file_is_a_setups_argument(campaign, tmp_path):
                                        '[[setup]]\nfile = "s0.csv"\n')
     with pytest.raises(ValueError, match=r"bad.toml: \[settings\]: .*'blok_rows'"):
         modaluq.identify_setups(tmp_path / "bad.toml")
+
+
+def _reliable(diagram, members):
+    """The members whose σ the selection uses: not at a close cut, not noise-coupled, finite σ."""
+    m = np.asarray(members)
+    keep = ~(diagram.close_singular_values[m] | diagram.noise_coupled[m])
+    keep &= np.isfinite(diagram.frequency_std[m]) & np.isfinite(diagram.damping_std[m])
+    return m[keep]
+
+
+def test_the_merged_selection_reports_the_sigma_of_the_cluster_mean(campaign):
+    """identify_setups' selection: σ of the mean of the reliable members (docs/uq-math.md §13.10),
+    the value, the clusters and the shapes' σ unchanged; the same by every path (Result,
+    Diagram, modaluq.select_modes)."""
+    res = modaluq.identify_setups(_frames(campaign), fs=campaign.fs, references=["L3", "R8"],
+                                  block_rows=15, orders=ORDERS, n_blocks=12)
+    diagram = res.stabilization_diagram()
+    sel = res.select_modes()
+    median = diagram.select_modes(cluster_std="median")
+    assert sel.settings.cluster_std == "mean" and median.settings.cluster_std == "median"
+    assert "of the mean over the cluster" in str(sel)
+    for other in (diagram.select_modes(), modaluq.select_modes(diagram), diagram.select_modes(cluster_std="mean")):
+        np.testing.assert_array_equal(other.frequency_std, sel.frequency_std)
+    assert sel.n_modes == median.n_modes >= 6
+    np.testing.assert_array_equal(sel.representative_pole, median.representative_pole)
+    np.testing.assert_array_equal(sel.frequency_hz, median.frequency_hz)
+    np.testing.assert_array_equal(sel.mode_shape_std_real, median.mode_shape_std_real)
+    rows = diagram.frequency_damping_factor
+    assert rows.shape == (diagram.n_poles, 2, res.n_blocks)
+    for k in range(sel.n_modes):
+        reliable = _reliable(diagram, sel.members[k])
+        u = rows[reliable].mean(axis=0)  # the mean's factor rows
+        sf, sx = np.linalg.norm(u[0]), np.linalg.norm(u[1])
+        assert sel.frequency_std[k] == pytest.approx(sf, rel=1e-12)
+        assert sel.damping_std[k] == pytest.approx(sx, rel=1e-12)
+        assert sel.frequency_damping_correlation[k] == pytest.approx(u[0] @ u[1] / (sf * sx), rel=1e-9, abs=1e-12)
+        # the median run reports the median of the same poles' σ
+        assert median.frequency_std[k] == np.median(diagram.frequency_std[reliable])
+        # never above the members' mean σ (Cauchy-Schwarz)
+        assert sf <= np.mean(diagram.frequency_std[reliable]) * (1 + 1e-12)
+        # the mode's covariance: its [f, ξ] block is the mean's, the shape block the representative's
+        cov, own = sel.mode_covariance[k], diagram.pole_covariance(sel.representative_pole[k])
+        rho = sel.frequency_damping_correlation[k]
+        np.testing.assert_allclose(cov[:2, :2], [[sf * sf, rho * sf * sx], [rho * sf * sx, sx * sx]], rtol=1e-9)
+        np.testing.assert_array_equal(cov[2:, 2:], own[2:, 2:])
+        np.testing.assert_allclose(cov[0, 2:], own[0, 2:] * sf / np.sqrt(own[0, 0]), rtol=1e-12)
+        np.testing.assert_array_equal(median.mode_covariance[k], own)
+    # the merged poles decorrelate across orders: the mean's σ is mostly below one order's
+    assert np.median(sel.frequency_std / median.frequency_std) < 1.0
+
+
+def test_one_record_keeps_the_median(campaign):
+    """identify's selection is unchanged: the median of the reliable members' σ, bit for bit, and
+    the representative's covariance and f-ξ correlation."""
+    s = campaign.setups[0]
+    res = modaluq.identify(s.y, fs=campaign.fs, block_rows=15, orders=ORDERS, n_blocks=20)
+    diagram = res.stabilization_diagram()
+    sel = res.select_modes()
+    assert sel.settings.cluster_std == "median"
+    assert "median over the cluster" in str(sel)
+    assert diagram.frequency_damping_factor.shape == (diagram.n_poles, 2, res.n_blocks)  # kept all the same
+    assert sel.n_modes >= 3
+    for k in range(sel.n_modes):
+        reliable = _reliable(diagram, sel.members[k])
+        assert sel.frequency_std[k] == np.median(diagram.frequency_std[reliable])
+        assert sel.damping_std[k] == np.median(diagram.damping_std[reliable])
+        rep = sel.representative_pole[k]
+        assert sel.frequency_damping_correlation[k] == diagram.frequency_damping_correlation[rep]
+        np.testing.assert_array_equal(sel.mode_covariance[k], diagram.pole_covariance(rep))
+    # asked for, the mean is available for one record too
+    mean = diagram.select_modes(cluster_std="mean")
+    np.testing.assert_array_equal(mean.frequency_hz, sel.frequency_hz)
+    assert not np.array_equal(mean.frequency_std, sel.frequency_std)
+
+
+def test_factor_rows_survive_a_copy_of_the_result(campaign):
+    """A Result without the core's identification (copied, unpickled) flattens its modes with
+    their factor rows: the same selection."""
+    import pickle
+
+    res = modaluq.identify_setups(_frames(campaign)[:3], fs=campaign.fs, references=["L3", "R8"], **SMALL_DIAGRAM)
+    copy = pickle.loads(pickle.dumps(res))
+    assert copy.core_identification is None
+    a, b = res.select_modes(), copy.select_modes()
+    np.testing.assert_array_equal(a.frequency_std, b.frequency_std)
+    assert b.settings.cluster_std == "mean"
+    m = res.at_order(12)
+    assert m.frequency_damping_factor.shape == (m.n_modes, 2, res.n_blocks)
+    np.testing.assert_allclose(np.einsum("mik,mjk->mij", m.frequency_damping_factor, m.frequency_damping_factor),
+                               m.covariance[:, :2, :2], rtol=1e-12, atol=1e-12 * np.max(m.covariance[:, :2, :2]))

@@ -103,7 +103,9 @@ def test_core_merge_equals_the_numpy_reference(case):
                     _rel_cols(m.mode_shape_std_real, r["mode_shape_std_real"]),
                     _rel_cols(m.mode_shape_std_imag, r["mode_shape_std_imag"]),
                     _rel_cols(m.covariance, cov_ref),
-                    _rel_cols(m.noise_coupling[None], r["noise_coupling"][None]))
+                    _rel_cols(m.noise_coupling[None], r["noise_coupling"][None]),
+                    # each pole's factor rows of f and xi, column i [u_f; u_xi] (Modes.frequency_damping_factor)
+                    _rel_cols(m.frequency_damping_factor, r["factor"][:, :2, :].reshape(nm, -1).T))
         assert point < TOL, (n, point)
         assert sigma < (TOL if n <= TRUE_ORDER else TOL_ABOVE_TRUE_ORDER), (n, sigma)
         key = "up to the true order" if n <= TRUE_ORDER else "above"
@@ -116,6 +118,25 @@ def test_core_merge_feeds_the_diagram(case):
     poles = _core.poles_of(ident)
     assert len(poles.frequency_hz) == sum(len(m.frequency_hz) for m in ident.modes)
     assert ident.n_blocks == NB * len(camp.setups)
+    # the poles carry every pole's factor rows, one column per block of every setup
+    assert poles.frequency_damping_factor.shape == (2 * ident.n_blocks, len(poles.frequency_hz))
+    assert np.array_equal(poles.frequency_damping_factor,
+                          np.hstack([m.frequency_damping_factor for m in ident.modes if len(m.frequency_hz)]))
+
+
+def test_factor_rows_reproduce_the_covariance(case):
+    """Each pole's stored rows [u_f; u_xi] are its factor's: U Uᵀ is the covariance's [f, ξ] block."""
+    camp, ident, ref, rcamp = case
+    l_g = ident.modes[0].mode_shape.shape[0]
+    nb = ident.n_blocks
+    for m in ident.modes:
+        nm = len(m.frequency_hz)
+        assert m.frequency_damping_factor.shape == ((2 * nb, nm) if nm else (0, 0))
+        for i in range(nm):
+            u = m.frequency_damping_factor[:, i].reshape(2, nb)
+            cov = m.covariance[:, i].reshape(2 + 2 * l_g, 2 + 2 * l_g)[:2, :2]
+            np.testing.assert_allclose(u @ u.T, cov, rtol=1e-12, atol=1e-12 * np.sqrt(cov[0, 0] * cov[1, 1]))
+            assert np.linalg.norm(u[0]) == pytest.approx(m.frequency_std[i], rel=1e-12)
 
 
 def test_core_refuses_a_setup_without_the_references():

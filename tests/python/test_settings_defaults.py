@@ -30,7 +30,10 @@ SEAMS = {
     StabilityCriteria: (_core.StabilityCriteria, {
         "frequency_range": "the identification's band (Settings.frequency_range), set by stabilization_diagram",
     }, {}),
-    ClusteringSettings: (_core.ClusteringOptions, {}, {}),
+    ClusteringSettings: (_core.ClusteringOptions, {}, {
+        "cluster_std": "None: the identification's own, resolved by select_modes (the mean for a multi-setup "
+                       "merge, the core's median for one record); to_core gives the core's default",
+    }),
 }
 
 
@@ -84,7 +87,8 @@ def test_to_dict_and_record_are_unchanged():
         "distance_threshold": 0.02, "min_cluster_size": None, "min_cluster_fraction": 0.25,
         "per_cluster_min_size": False, "max_frequency_std_per_bandwidth": 1.0, "merge_fragments": True,
         "drop_doublets": True, "doublet_window": 0.05, "doublet_min_mac": 0.8, "fragment_std_factor": 3.0,
-        "fragment_min_mac": 0.8, "fragment_max_shared": 0.25, "statuses": ["stable"], "linkage": "average"}
+        "fragment_min_mac": 0.8, "fragment_max_shared": 0.25, "statuses": ["stable"], "linkage": "average",
+        "cluster_std": None}
     assert StabilityCriteria().to_dict() == {
         "max_frequency_change": 0.01, "max_damping_change": 0.1, "min_mac": 0.98, "frequency_std_factor": 2.0,
         "max_frequency_cov": 0.05, "min_damping_ratio": 0.0, "max_damping_ratio": 0.2, "damping_std_factor": 2.0,

@@ -12,6 +12,7 @@ import pytest
 
 import modaluq
 from modaluq import _core
+from modaluq.simulate.campaign import simulate_campaign
 from stabilization_oracle import select_modes_reference, stabilization_diagram_reference
 
 
@@ -26,6 +27,10 @@ def _records():
                                                               orders=range(2, 31, 2), uncertainty=False),
         "frame, two inputs": lambda: modaluq.identify(frame.y, frame.u, fs=frame.fs, block_rows=12,
                                                       orders=range(2, 45, 1)),
+        # a multi-setup merge: its selection reports the sigma of the cluster's mean by default
+        "campaign, merged": lambda: modaluq.identify_setups(
+            simulate_campaign(4, durations=(120.0, 140.0, 110.0, 130.0, 150.0, 120.0)).frames(), fs=25.0,
+            references=["L3", "R8"], block_rows=15, orders=range(2, 25, 2), n_blocks=12),
     }
 
 
@@ -36,7 +41,7 @@ CLUSTERING = [{}, {"linkage": "single"}, {"linkage": "complete", "distance_thres
               {"linkage": "weighted", "min_cluster_size": 2},
               {"statuses": ("stable", "stable_frequency"), "min_cluster_fraction": 0.5},
               {"per_cluster_min_size": True, "max_frequency_std_per_bandwidth": 0.3},
-              {"max_frequency_std_per_bandwidth": None}]
+              {"max_frequency_std_per_bandwidth": None}, {"cluster_std": "mean"}, {"cluster_std": "median"}]
 
 
 @pytest.fixture(scope="module")
@@ -75,6 +80,10 @@ def assert_same_selection(core, ref):
         np.testing.assert_allclose(getattr(core, name), getattr(ref, name), rtol=1e-9, atol=1e-13, err_msg=name)
     for name in ("n_poles", "order_min", "order_max", "representative_order"):
         np.testing.assert_array_equal(getattr(core, name), getattr(ref, name), err_msg=name)
+    assert core.settings.cluster_std == ref.settings.cluster_std
+    if core.settings.cluster_std == "mean":  # the correlation of the mean, from the same rows
+        np.testing.assert_allclose(core.frequency_damping_correlation, ref.frequency_damping_correlation,
+                                   rtol=1e-9, atol=1e-13)
 
 
 @pytest.mark.parametrize("criteria", CRITERIA, ids=str)

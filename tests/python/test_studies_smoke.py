@@ -110,6 +110,8 @@ def test_poser_mc(capsys):
     text = capsys.readouterr().out
     assert "| mode | f (Hz) | method |" in text and "MC std f modular/PoSER" in text
     assert "frozen merge" in text and "coverage f modular / PoSER" in text
+    assert "| mode | σ_f/MC mean / median |" in text  # the modular σ of the cluster's mean beside the median
+    assert out["input/output"][0]["modular median"].shape == (6, 4)
     out = _module("poser_mc").main(n=2, configs=["diagram", "auto", "output-only"])  # frequency_range only
     assert "poser" not in out["output-only"][0] and out["output-only"][0]["modular"].shape == (6, 4)
     assert "frequency_range (0.5, 11) Hz only" in capsys.readouterr().out

@@ -193,6 +193,7 @@ inline Modes degenerate_modes(Index order, Index n_outputs, bool with_uncertaint
         m.mode_shape_std_real.resize(n_outputs, 0);
         m.mode_shape_std_imag.resize(n_outputs, 0);
         m.covariance.resize(np * np, 0);
+        m.frequency_damping_factor.resize(0, 0);
         m.block_too_short.resize(0);
         m.frequency_damping_correlation.resize(0);
         m.noise_coupling.resize(0);

@@ -36,6 +36,13 @@ struct Modes {
     /// (2 + 2l)^2 x n_modes; column i is mode i's covariance of [f, xi, Re shape, Im shape]
     /// (symmetric, so row- and column-major readings agree).
     Eigen::MatrixXd covariance;
+    /// 2 n_b x n_modes; column i is [u_f^T; u_xi^T], the rows of f (Hz) and xi (fraction) of mode
+    /// i's first-order factor U (covariance = U U^T), one entry per block of the covariance factor
+    /// T (docs/uq-math.md §3; for identify_setups the blocks of every setup, setup by setup,
+    /// (12.7)): var f = |u_f|^2, cov(f, xi) = u_f . u_xi, exactly `covariance`'s [f, xi] block.
+    /// What the selection's sigma of a cluster's mean is formed from (ClusteringOptions::cluster_std,
+    /// docs/uq-math.md §13.10): 2 n_b doubles per mode.
+    Eigen::MatrixXd frequency_damping_factor;
     /// Per mode, the correlation of f and xi, cov(f, xi) / sqrt(var f var xi) from `covariance`
     /// (NaN where a variance is 0).
     Eigen::VectorXd frequency_damping_correlation;

@@ -45,6 +45,7 @@
 #include "modal.hpp"
 #include "realization.hpp"
 #include "subspace.hpp"
+#include "uncertainty.hpp"
 
 namespace modaluq {
 
@@ -544,12 +545,11 @@ inline SetupsIdentification identify_setups(const std::vector<SetupData>& setups
                 // setup has a frozen column among the first n, frozen in full and unfrozen for rho
                 // (5.14) and the shapes of flagged poles, as UncertaintyPropagator::modes does.
                 const detail::OrderContext ctx(eig, ss, R);
-                const Index nm = modes.n_modes(), np = 2 + 2 * l_g;
+                const Index nm = modes.n_modes();
                 const bool frozen = std::any_of(sg.begin(), sg.end(), [&](const detail::SetupGamma& g) {
                     return g.freezes() && n > g.k_star;
                 });
-                modes.noise_coupling = Eigen::VectorXd::Ones(nm);
-                modes.noise_coupled = Eigen::Array<bool, Eigen::Dynamic, 1>::Constant(nm, false);
+                detail::resize_mode_uncertainty(modes, l_g, nb_total);
                 Eigen::MatrixXcd dlam;
                 std::vector<Eigen::MatrixXcd> dshape;
                 std::vector<Eigen::MatrixXd> ut_f;
@@ -572,34 +572,14 @@ inline SetupsIdentification identify_setups(const std::vector<SetupData>& setups
                 } else {
                     detail::eigen_perturbation_blocks(ctx, block_q(false), dlam, dshape);
                 }
-                modes.frequency_std.resize(nm);
-                modes.damping_std.resize(nm);
-                modes.mode_shape_std_real.resize(l_g, nm);
-                modes.mode_shape_std_imag.resize(l_g, nm);
-                modes.covariance.resize(np * np, nm);
-                modes.block_too_short.resize(nm);
-                modes.frequency_damping_correlation.resize(nm);
+                // The factor rows of each pole (the frozen or the plain, by its flag), as for one record.
                 for (Index i = 0; i < nm; ++i) {
                     const Eigen::MatrixXd ut =
                         (frozen && !modes.noise_coupled(i))
                             ? ut_f[i]
                             : detail::modal_perturbation(ctx.lambda(i), options.fs, ss.C.cast<cd>() * ctx.phi.col(i),
                                                          modes.reference_component(i), dlam.row(i), dshape[i]);
-                    // U U^T by its lower triangle (SYRK: half the flops; 2 + 2 l_g is large here)
-                    Eigen::MatrixXd cv = Eigen::MatrixXd::Zero(np, np);
-                    cv.selfadjointView<Eigen::Lower>().rankUpdate(ut);
-                    cv.triangularView<Eigen::StrictlyUpper>() = cv.transpose();
-                    modes.covariance.col(i) = Eigen::Map<const Eigen::VectorXd>(cv.data(), np * np);
-                    const Eigen::VectorXd sd = cv.diagonal().cwiseMax(0.0).cwiseSqrt();
-                    modes.frequency_std(i) = sd(0);
-                    modes.damping_std(i) = sd(1);
-                    modes.frequency_damping_correlation(i) =
-                        cv(0, 0) > 0.0 && cv(1, 1) > 0.0 ? cv(1, 0) / std::sqrt(cv(0, 0) * cv(1, 1))
-                                                         : std::numeric_limits<double>::quiet_NaN();
-                    modes.mode_shape_std_real.col(i) = sd.segment(2, l_g);
-                    modes.mode_shape_std_imag.col(i) = sd.segment(2 + l_g, l_g);
-                    const double decay_s = 1.0 / (2.0 * detail::pi * modes.frequency_hz(i) * modes.damping_ratio(i));
-                    modes.block_too_short(i) = modes.damping_ratio(i) > 0.0 && block_seconds < 0.5 * decay_s;
+                    detail::set_mode_uncertainty(modes, i, ut, block_seconds);
                 }
             }
         } catch (const numerical_error& e) {

@@ -21,6 +21,26 @@
 
 namespace modaluq {
 
+/// Which sigma of f and xi select_modes reports for a cluster (ClusteringOptions::cluster_std).
+/// Over the cluster's reliable poles (not at a close cut, not noise-coupled), K of them:
+enum class ClusterStd : int {
+    /// the median of their sigma: one order's sigma, whichever order the mode is read at
+    median = 0,
+    /// the sigma of their mean, |(1/K) sum_m u_m| from the rows u_m of Poles::frequency_damping_factor
+    /// (docs/uq-math.md §13.10): what the selected value scatters like when the poles of one
+    /// identification decorrelate across orders (a multi-setup merge). The median where the poles
+    /// carry no factor rows.
+    mean = 1,
+};
+
+inline const char* to_string(ClusterStd c) {
+    switch (c) {
+        case ClusterStd::median: return "median";
+        case ClusterStd::mean: return "mean";
+    }
+    return "?";
+}
+
 /// How select_modes groups poles into modes.
 struct ClusteringOptions {
     /// Cut height on d_ij = |f_i - f_j| / max(f_i, f_j) + (1 - MAC_ij) (e.g. 1 % in frequency
@@ -58,6 +78,13 @@ struct ClusteringOptions {
     double fragment_max_shared = 0.25;
     std::vector<PoleStatus> statuses{PoleStatus::stable};  ///< which poles are clustered
     Linkage linkage = Linkage::average;  ///< see detail/linkage.hpp
+    /// The sigma of f and xi reported per mode (SelectedModes::frequency_std, damping_std,
+    /// frequency_damping_correlation); the clusters, the representative and its value, and the
+    /// tests on the poles' own sigma (max_frequency_std_per_bandwidth, merge_fragments) do not
+    /// depend on it. Default median: one record's poles are nearly collinear across orders, where
+    /// the two agree. The Python identify_setups selects with mean: a merge's poles decorrelate
+    /// across orders and the median overstates the scatter of the selected value (issue 23).
+    ClusterStd cluster_std = ClusterStd::median;
 
     void validate() const {
         detail::require(std::isfinite(distance_threshold) && distance_threshold > 0.0,
@@ -107,14 +134,15 @@ inline const char* to_string(DropReason r) {
 }
 
 /// Modes chosen from a Diagram, sorted by frequency. f, xi and the shape are those of one
-/// representative pole; frequency_std and damping_std are the median over the cluster's
-/// reliable poles (not at a close cut, not noise-coupled); *_spread is the sample std (ddof 1)
-/// across the cluster, how much the estimate moves with the order.
+/// representative pole; frequency_std and damping_std are over the cluster's reliable poles (not
+/// at a close cut, not noise-coupled): the median of their sigma, or the sigma of their mean
+/// (ClusteringOptions::cluster_std); *_spread is the sample std (ddof 1) across the cluster, how
+/// much the estimate moves with the order.
 struct SelectedModes {
     Eigen::VectorXd frequency_hz;           ///< Hz
     Eigen::VectorXd damping_ratio;          ///< fraction
     Eigen::MatrixXcd mode_shape;            ///< l x n_modes, largest component 1
-    Eigen::VectorXd frequency_std;          ///< Hz, analytic, median over the reliable poles
+    Eigen::VectorXd frequency_std;          ///< Hz, analytic, over the reliable poles (cluster_std)
     Eigen::VectorXd damping_std;            ///< fraction
     Eigen::MatrixXd mode_shape_std_real;    ///< l x n_modes, of the representative
     Eigen::MatrixXd mode_shape_std_imag;    ///< l x n_modes
@@ -142,8 +170,9 @@ struct SelectedModes {
     Eigen::VectorXd dropped_twin_mac;       ///< DropReason::twin: MAC between the two shapes, else NaN
     /// per mode, median sigma_f / (f xi) over its cluster (NaN without uncertainty)
     Eigen::VectorXd frequency_std_per_bandwidth;
-    /// per mode, the correlation of f and xi of the representative pole (Poles::frequency_damping_correlation;
-    /// NaN without uncertainty or when the poles do not carry it)
+    /// per mode, the correlation of f and xi: the representative pole's (Poles::frequency_damping_correlation;
+    /// NaN without uncertainty or when the poles do not carry it), or with ClusterStd::mean from the
+    /// factor rows the sigma are (u_f . u_xi / (|u_f| |u_xi|) of the mean rows)
     Eigen::VectorXd frequency_damping_correlation;
     /// per mode, the representative pole's blocks are shorter than half its decay time
     /// (Modes::block_too_short): its sigma are less reliable
@@ -312,7 +341,9 @@ std::vector<std::vector<Index>> drop_doublets(std::vector<std::vector<Index>> ke
 /// 3. clusters smaller than the minimum size dropped (kept in dropped_*);
 /// 4. representative: the member nearest to the cluster's median frequency and damping ratio
 ///    (each in units of its median sigma) among those whose sigma is meaningful (not at a close
-///    cut, not noise-coupled), or among all; ties to the higher order.
+///    cut, not noise-coupled), or among all; ties to the higher order;
+/// 5. sigma of f and xi over the reliable members: their median, or the sigma of their mean
+///    (options.cluster_std).
 /// Deterministic: no random start, ties broken by order and index.
 inline SelectedModes select_modes(const Diagram& diagram, const ClusteringOptions& options = {}) {
     options.validate();
@@ -488,6 +519,7 @@ inline SelectedModes select_modes(const Diagram& diagram, const ClusteringOption
             if (reliable(i)) candidates.push_back(i);
         if (candidates.empty()) candidates = members;
         std::vector<double> sf, sxi, sf_all, sxi_all, fv, xv;
+        std::vector<Index> with_sigma;  // the reliable members with a finite sigma: those sf holds
         for (Index i : members) {
             fv.push_back(f(i));
             xv.push_back(xi(i));
@@ -497,6 +529,7 @@ inline SelectedModes select_modes(const Diagram& diagram, const ClusteringOption
             if (reliable(i)) {
                 sf.push_back(P.frequency_std(i));
                 sxi.push_back(P.damping_std(i));
+                with_sigma.push_back(i);
             }
         }
         const int ddof = members.size() > 1 ? 1 : 0;
@@ -523,6 +556,19 @@ inline SelectedModes select_modes(const Diagram& diagram, const ClusteringOption
             if (distance(i) <= distance(rep)) rep = i;
         s.frequency_std(k) = sf.empty() ? P.frequency_std(rep) : detail::median(sf);
         s.damping_std(k) = sxi.empty() ? P.damping_std(rep) : detail::median(sxi);
+        const bool of_mean = options.cluster_std == ClusterStd::mean && !with_sigma.empty() &&
+                             P.frequency_damping_factor.cols() == n && P.frequency_damping_factor.rows() > 0;
+        if (of_mean) {
+            // The mean of the members' estimates has the mean of their factor rows (docs/uq-math.md §13.10).
+            const Index nb = P.frequency_damping_factor.rows() / 2;
+            Eigen::VectorXd u = Eigen::VectorXd::Zero(2 * nb);
+            for (Index i : with_sigma) u += P.frequency_damping_factor.col(i);
+            u /= double(with_sigma.size());
+            const double uf = u.head(nb).norm(), uxi = u.tail(nb).norm();
+            s.frequency_std(k) = uf;
+            s.damping_std(k) = uxi;
+            s.frequency_damping_correlation(k) = uf > 0.0 && uxi > 0.0 ? u.head(nb).dot(u.tail(nb)) / (uf * uxi) : nan;
+        }
         Index ref = 0;
         P.mode_shape.col(rep).cwiseAbs().maxCoeff(&ref);
         for (Index r = 0; r < l; ++r) {
@@ -541,7 +587,7 @@ inline SelectedModes select_modes(const Diagram& diagram, const ClusteringOption
         if (P.has_uncertainty) s.frequency_std_per_bandwidth(k) = std_per_bandwidth(members);
         s.frequency_hz(k) = f(rep);
         s.damping_ratio(k) = xi(rep);
-        if (P.frequency_damping_correlation.size() == n)
+        if (!of_mean && P.frequency_damping_correlation.size() == n)
             s.frequency_damping_correlation(k) = P.frequency_damping_correlation(rep);
         if (P.block_too_short.size() == n) s.block_too_short(k) = P.block_too_short(rep);
         s.mode_shape.col(k) = P.mode_shape.col(rep);

@@ -123,6 +123,10 @@ struct Poles {
     Eigen::VectorXd frequency_damping_correlation;
     /// Modes::block_too_short of each pole; may be empty (unknown: taken as false).
     BoolArray block_too_short;
+    /// Modes::frequency_damping_factor of each pole: 2 n_b x n_poles, column i [u_f^T; u_xi^T] (Hz,
+    /// fraction), the first-order factor rows of f and xi (2 n_b doubles per pole). May be empty
+    /// (0 columns: unknown; the selection's ClusterStd::mean then falls back to the median).
+    Eigen::MatrixXd frequency_damping_factor;
     std::vector<Index> orders;           ///< identified orders, ascending (an order may hold no pole)
     bool has_uncertainty = true;         ///< the std fields are estimates (false: all NaN)
 
@@ -138,6 +142,10 @@ struct Poles {
                             (block_too_short.size() == 0 || block_too_short.size() == n),
                         "poles: frequency_damping_correlation and block_too_short must be empty or have ", n,
                         " entries");
+        detail::require(frequency_damping_factor.cols() == 0 ||
+                            (frequency_damping_factor.cols() == n && frequency_damping_factor.rows() % 2 == 0),
+                        "poles: frequency_damping_factor must be empty or 2 n_b x ", n, ", got ",
+                        frequency_damping_factor.rows(), " x ", frequency_damping_factor.cols());
         detail::require(mode_shape.cols() == n && mode_shape_std_real.cols() == n &&
                             mode_shape_std_imag.cols() == n && mode_shape_std_real.rows() == mode_shape.rows() &&
                             mode_shape_std_imag.rows() == mode_shape.rows(),
@@ -162,8 +170,20 @@ inline Poles poles_of(const Identification& id) {
     const double nan = std::numeric_limits<double>::quiet_NaN();
     Poles p;
     p.has_uncertainty = true;
-    for (const Modes& m : id.modes)
-        if (m.n_modes() > 0 && m.frequency_std.size() != m.n_modes()) p.has_uncertainty = false;
+    // the factor rows when every order with modes has them, all with one n_b (else none)
+    Index factor_rows = 0;
+    bool factor_known = true;
+    for (const Modes& m : id.modes) {
+        if (m.n_modes() == 0) continue;
+        if (m.frequency_std.size() != m.n_modes()) p.has_uncertainty = false;
+        const Eigen::MatrixXd& u = m.frequency_damping_factor;
+        if (u.cols() != m.n_modes() || u.rows() == 0 || (factor_rows > 0 && u.rows() != factor_rows))
+            factor_known = false;
+        else
+            factor_rows = u.rows();
+    }
+    if (!p.has_uncertainty || !factor_known) factor_rows = 0;
+    p.frequency_damping_factor.resize(factor_rows, factor_rows > 0 ? n : 0);
     p.order.resize(n);
     p.frequency_hz.resize(n);
     p.damping_ratio.resize(n);
@@ -195,6 +215,7 @@ inline Poles poles_of(const Identification& id) {
             if (m.frequency_damping_correlation.size() == k)
                 p.frequency_damping_correlation.segment(at, k) = m.frequency_damping_correlation;
             if (m.block_too_short.size() == k) p.block_too_short.segment(at, k) = m.block_too_short;
+            if (factor_rows > 0) p.frequency_damping_factor.middleCols(at, k) = m.frequency_damping_factor;
         }
         at += k;
     }

@@ -29,6 +29,47 @@
 
 namespace modaluq {
 
+namespace detail {
+
+/// Size the uncertainty fields of `modes` (its n_modes modes, l outputs, n_b blocks); the
+/// noise-coupling fields start at rho = 1, not flagged.
+inline void resize_mode_uncertainty(Modes& modes, Index l, Index nb) {
+    const Index nm = modes.n_modes(), np = 2 + 2 * l;
+    modes.frequency_std.resize(nm);
+    modes.damping_std.resize(nm);
+    modes.mode_shape_std_real.resize(l, nm);
+    modes.mode_shape_std_imag.resize(l, nm);
+    modes.covariance.resize(np * np, nm);
+    modes.frequency_damping_factor.resize(2 * nb, nm);
+    modes.block_too_short.resize(nm);
+    modes.frequency_damping_correlation.resize(nm);
+    modes.noise_coupling = Eigen::VectorXd::Ones(nm);
+    modes.noise_coupled = Eigen::Array<bool, Eigen::Dynamic, 1>::Constant(nm, false);
+}
+
+/// Mode i's uncertainty from its factor `ut` ((2 + 2l) x n_b, rows f, xi, Re shape, Im shape,
+/// stage 5): the covariance U U^T, the std, the f-xi correlation, the factor rows of f and xi, and
+/// the block-length flag (blocks of block_seconds).
+inline void set_mode_uncertainty(Modes& modes, Index i, const Eigen::MatrixXd& ut, double block_seconds) {
+    const Index np = ut.rows(), l = (np - 2) / 2, nb = ut.cols();
+    const Eigen::MatrixXd cov = ut * ut.transpose();
+    modes.covariance.col(i) = Eigen::Map<const Eigen::VectorXd>(cov.data(), np * np);
+    modes.frequency_damping_factor.col(i).head(nb) = ut.row(0).transpose();
+    modes.frequency_damping_factor.col(i).tail(nb) = ut.row(1).transpose();
+    const Eigen::VectorXd sd = cov.diagonal().cwiseMax(0.0).cwiseSqrt();
+    modes.frequency_std(i) = sd(0);
+    modes.damping_std(i) = sd(1);
+    modes.frequency_damping_correlation(i) = cov(0, 0) > 0.0 && cov(1, 1) > 0.0
+                                                 ? cov(1, 0) / std::sqrt(cov(0, 0) * cov(1, 1))
+                                                 : std::numeric_limits<double>::quiet_NaN();
+    modes.mode_shape_std_real.col(i) = sd.segment(2, l);
+    modes.mode_shape_std_imag.col(i) = sd.segment(2 + l, l);
+    const double decay_s = 1.0 / (2.0 * pi * modes.frequency_hz(i) * modes.damping_ratio(i));
+    modes.block_too_short(i) = modes.damping_ratio(i) > 0.0 && block_seconds < 0.5 * decay_s;
+}
+
+}  // namespace detail
+
 /// How the propagation treats the singular vectors below the noise floor (docs/uq-math.md §5.5).
 struct NoiseOptions {
     /// Hold the directions of the singular vectors from the noise floor k* on fixed (their scale
@@ -79,17 +120,8 @@ public:
     void apply(Modes& modes, const Eigenstructure& eig, const StateSpace& ss, double fs,
                double block_seconds) const {
         using detail::cd;
-        const Index n = modes.order, nm = modes.n_modes(), l = l_;
-        const Index np = 2 + 2 * l;
-        modes.frequency_std.resize(nm);
-        modes.damping_std.resize(nm);
-        modes.mode_shape_std_real.resize(l, nm);
-        modes.mode_shape_std_imag.resize(l, nm);
-        modes.covariance.resize(np * np, nm);
-        modes.block_too_short.resize(nm);
-        modes.frequency_damping_correlation.resize(nm);
-        modes.noise_coupling = Eigen::VectorXd::Ones(nm);
-        modes.noise_coupled = Eigen::Array<bool, Eigen::Dynamic, 1>::Constant(nm, false);
+        const Index n = modes.order, nm = modes.n_modes();
+        detail::resize_mode_uncertainty(modes, l_, nb_);
 
         // Singular-value gap at this order, judged against its own uncertainty. Only a cut
         // between significant singular values matters: one in the noise is frozen (§5.5).
@@ -128,18 +160,7 @@ public:
                     ? ut_f[i]
                     : detail::modal_perturbation(ctx.lambda(i), fs, ss.C.cast<cd>() * ctx.phi.col(i),
                                                  modes.reference_component(i), dlam.row(i), dshape[i]);
-            const Eigen::MatrixXd cov = ut * ut.transpose();
-            modes.covariance.col(i) = Eigen::Map<const Eigen::VectorXd>(cov.data(), np * np);
-            const Eigen::VectorXd sd = cov.diagonal().cwiseMax(0.0).cwiseSqrt();
-            modes.frequency_std(i) = sd(0);
-            modes.damping_std(i) = sd(1);
-            modes.frequency_damping_correlation(i) = cov(0, 0) > 0.0 && cov(1, 1) > 0.0
-                                                         ? cov(1, 0) / std::sqrt(cov(0, 0) * cov(1, 1))
-                                                         : std::numeric_limits<double>::quiet_NaN();
-            modes.mode_shape_std_real.col(i) = sd.segment(2, l);
-            modes.mode_shape_std_imag.col(i) = sd.segment(2 + l, l);
-            const double decay_s = 1.0 / (2.0 * detail::pi * modes.frequency_hz(i) * modes.damping_ratio(i));
-            modes.block_too_short(i) = modes.damping_ratio(i) > 0.0 && block_seconds < 0.5 * decay_s;
+            detail::set_mode_uncertainty(modes, i, ut, block_seconds);
         }
     }
 

@@ -56,6 +56,9 @@ def test_a_campaign_end_to_end(campaign_file, tmp_path, capsys):
     truth = shapes[[DECK_DOFS.index(d) for d in dofs]]
     modes = doc["modes"]
     assert len(modes) == 6
+    # the merge's σ of f and ξ: the σ of each cluster's mean (docs/uq-math.md §13.10), said in the file
+    assert doc["clustering"]["clustering"]["cluster_std"] == "mean"
+    assert "of the mean over the cluster" in doc["units"]["std"]
     for k, m in enumerate(modes):
         assert list(m["mode_shape"]) == dofs
         assert abs(m["frequency_hz"] / f0[k] - 1) < 0.01
