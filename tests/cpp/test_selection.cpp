@@ -348,9 +348,11 @@ TEST_CASE("selection: cluster_std mean reports the norm of the mean of the relia
     const auto e = modaluq::select_modes(d, mean);
     CHECK(e.frequency_std == a.frequency_std);
     CHECK(e.damping_std == a.damping_std);
-    // rows for some poles only: refused
+    // rows for some poles only: refused (by the poles' check and by the selection)
     d.poles.frequency_damping_factor.resize(2 * nb, 3);
     CHECK_THROWS_WITH_AS(d.poles.validate(), doctest::Contains("frequency_damping_factor"), modaluq::invalid_argument);
+    CHECK_THROWS_WITH_AS(modaluq::select_modes(d, mean), doctest::Contains("frequency_damping_factor"),
+                         modaluq::invalid_argument);
     d.poles.frequency_damping_factor.resize(2 * nb + 1, n);  // not two rows of n_b
     CHECK_THROWS_WITH_AS(d.poles.validate(), doctest::Contains("frequency_damping_factor"), modaluq::invalid_argument);
     CHECK(std::string(modaluq::to_string(modaluq::ClusterStd::mean)) == "mean");

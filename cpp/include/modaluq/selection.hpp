@@ -350,6 +350,10 @@ inline SelectedModes select_modes(const Diagram& diagram, const ClusteringOption
     const Poles& P = diagram.poles;
     const Index n = P.size();
     detail::require(Index(diagram.status.size()) == n, "diagram: status must have one entry per pole");
+    detail::require(P.frequency_damping_factor.cols() == 0 ||
+                        (P.frequency_damping_factor.cols() == n && P.frequency_damping_factor.rows() % 2 == 0),
+                    "diagram: poles.frequency_damping_factor must be empty or 2 n_b x ", n, ", got ",
+                    P.frequency_damping_factor.rows(), " x ", P.frequency_damping_factor.cols());
     const Eigen::VectorXd &f = P.frequency_hz, &xi = P.damping_ratio;
 
     std::vector<Index> idx;
