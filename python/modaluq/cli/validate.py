@@ -19,6 +19,7 @@ import sys
 from pathlib import Path
 
 from ..checks import MAX_THREADS
+from ..io import FORMATS
 from ..validation import monte_carlo
 from .common import CliError, check_output_paths, integer_option, option_error, real_option
 
@@ -199,7 +200,7 @@ def register(subparsers) -> None:
     g.add_argument("--split-halves", metavar="FILE", default=None, help="the record (any format of modaluq identify)")
     g.add_argument("--fs", type=float, default=None, metavar="HZ",
                    help="sampling frequency in Hz (default: the file's)")
-    g.add_argument("--format", default=None, help="file format (default: from the extension)")
+    g.add_argument("--format", default=None, choices=list(FORMATS), help="file format (default: from the extension)")
     g.add_argument("--read-option", action="append", metavar="KEY=VALUE", default=None,
                    help="option of the file reader, as for modaluq identify; repeat for several")
     g.add_argument("--inputs", nargs="+", metavar="CH", default=None, help="known-input channels (default: none)")
