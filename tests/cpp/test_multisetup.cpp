@@ -211,15 +211,8 @@ TEST_CASE("each merged pole's factor rows of f and xi reproduce its covariance's
         for (const auto& m : id.modes) {
             REQUIRE(m.frequency_damping_factor.rows() == 2 * nb);
             REQUIRE(m.frequency_damping_factor.cols() == m.n_modes());
-            const Index np = 2 + 2 * mc::n_global;
-            for (Index i = 0; i < m.n_modes(); ++i) {
-                const Eigen::Map<const MatrixXd> cov(m.covariance.col(i).data(), np, np);
-                MatrixXd u(2, nb);
-                u.row(0) = m.frequency_damping_factor.col(i).head(nb).transpose();
-                u.row(1) = m.frequency_damping_factor.col(i).tail(nb).transpose();
-                const MatrixXd uut = u * u.transpose();
-                CHECK((uut - cov.topLeftCorner(2, 2)).cwiseAbs().maxCoeff() <= 1e-12 * std::sqrt(cov(0, 0) * cov(1, 1)));
-            }
+            REQUIRE(m.mode_shape.rows() == mc::n_global);
+            for (Index i = 0; i < m.n_modes(); ++i) CHECK(support::factor_rows_covariance_error(m, i) <= 1e-12);
         }
         const modaluq::Poles p = modaluq::poles_of(id);
         CHECK(p.frequency_damping_factor.rows() == 2 * nb);

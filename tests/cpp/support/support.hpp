@@ -154,6 +154,24 @@ inline modaluq::IdentifyOptions options(double fs, Index p, Index q, std::vector
 
 inline double rel(const MatrixXd& a, const MatrixXd& b) { return (a - b).norm() / std::max(b.norm(), 1e-300); }
 
+/// Mode i's rows [u_f; u_xi] of Modes::frequency_damping_factor as a 2 x n_b matrix.
+inline MatrixXd factor_rows(const modaluq::Modes& m, Index i) {
+    const Index nb = m.frequency_damping_factor.rows() / 2;
+    MatrixXd u(2, nb);
+    u.row(0) = m.frequency_damping_factor.col(i).head(nb).transpose();
+    u.row(1) = m.frequency_damping_factor.col(i).tail(nb).transpose();
+    return u;
+}
+
+/// max |U U^T - [f, xi] block of mode i's covariance| over sqrt(var f var xi): how far the factor
+/// rows are from reproducing the covariance they were reduced to.
+inline double factor_rows_covariance_error(const modaluq::Modes& m, Index i) {
+    const Index np = 2 + 2 * m.mode_shape.rows();
+    const Eigen::Map<const MatrixXd> cov(m.covariance.col(i).data(), np, np);
+    const MatrixXd u = factor_rows(m, i);
+    return (u * u.transpose() - cov.topLeftCorner(2, 2)).cwiseAbs().maxCoeff() / std::sqrt(cov(0, 0) * cov(1, 1));
+}
+
 inline MatrixXd kron(const MatrixXd& A, const MatrixXd& B) {
     MatrixXd K(A.rows() * B.rows(), A.cols() * B.cols());
     for (Index i = 0; i < A.rows(); ++i)
