@@ -45,7 +45,8 @@ def test_every_study_is_smoke_tested():
     tested = set(HIGH_ORDER_RUNS) | {"prop.py", "earthquake_records.py", "settings_records.py", "selected_sigma_mc.py",
                                            "indicators_mc.py", "multisetup_mc.py", "automac_mc.py",
                                            "warnings_issue27.py", "warnings_issue27_premise.py",
-                                           "io_block_bias.py", "poser_mc.py", "pyoma2_multisetup.py"}
+                                           "io_block_bias.py", "poser_mc.py", "pyoma2_multisetup.py",
+                                           "split_halves_pool.py"}
     assert scripts == tested
 
 
@@ -150,6 +151,20 @@ def test_earthquake_records(capsys):
     assert {t["verdict"] for t in targets} <= {"physical", "probable", "not shown", "not found"}
     assert set(results) == {"default OO", "default IO"}
     assert "Meloland" in capsys.readouterr().out
+
+
+def test_split_halves_pool_without_data(tmp_path):
+    with pytest.raises(ValueError, match="record 'nothing'"):
+        _module("split_halves_pool").main(tmp_path, records=["nothing"])
+
+
+@needs_data
+def test_split_halves_pool(capsys, tmp_path):
+    rows, failed = _module("split_halves_pool").main(DATA, tmp_path / "pairs.csv", records=("sensor array",),
+                                                     levels=(1,))
+    assert failed == [] and {r["record"] for r in rows} <= {"sensor array"}
+    assert (tmp_path / "pairs.csv").read_text().startswith("group,record,n_windows,window")
+    assert "| **measured, pooled** |" in capsys.readouterr().out
 
 
 # every script of studies/high_orders with the arguments of a tiny run, in the order of

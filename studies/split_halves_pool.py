@@ -1,0 +1,216 @@
+"""Issue 27, "split halves of the shared measured records": z = (x₁ − x₂) / √(σ₁² + σ₂²) of f
+and ξ pooled over many mode pairs, with ``modaluq.validation.split_halves`` on windows of the
+shared records (docs/validation.md, "The split-halves check on your own record").
+
+The windows (fixed before any z was looked at): each record, of length T, is cut into n = 1, 2,
+4 and 8 consecutive non-overlapping windows of T/n, and each window is split into its two halves
+(``split_halves`` with ``start``/``stop`` = the window), at the first half's automatic settings
+(block_rows, orders, n_blocks) and the band of the record below; pairs within 2 % in frequency
+and MAC >= 0.8 (the defaults). A window too short for the automatic settings is counted as
+failed and gives no pair. Pairs of one level n are independent (disjoint data); pairs of
+different levels share data and are not, so the table also gives each level alone.
+
+Records and bands: the bands of the table already in docs/validation.md; the smartphone slab
+is its ``recommended_slice`` (the data README: the operator touches the phone outside it), all
+three channels; the TDMS files are read by ``modaluq.io.load`` (all 8 acceleration channels).
+The earthquake records (Meloland, Painter Street, output-only) are run too but **not pooled**:
+strong motion is transient, the first half holds the shaking and the second the coda, and the
+structure's frequencies move with amplitude (up to 6 % between them, studies/earthquake_records.py),
+so a z beyond ±1.96 there says nothing about σ. The simulated records are a separate group.
+
+Each pair is also flagged ``harmonic`` when ``modaluq.harmonics.possible_harmonics`` (the
+package's kurtosis test, run on the window's outputs with every frequency of both halves, so that
+the family rule sees the fundamentals) flags its mean frequency: a rotor harmonic moves with the
+rotor's speed, not with σ. The measured pool is given with and without them. ``rms_ratio`` is the
+RMS of the second half's outputs over the first's (the largest over channels, ≥ 1): a diagnostic
+of stationarity, not a rule.
+
+The pairing truncates z_f: two frequencies more than the tolerance apart (2 %) are not paired,
+so a pair's |z_f| can be at most ``z_f_cap`` = tolerance·f / √(σ_f₁² + σ_f₂²), which is below 1.96 for
+short halves and broad modes. That biases RMS z_f down and the share within ±1.96 up. The tables
+therefore also give the pairs with ``z_f_cap`` >= 3 (a condition on σ, not on z), and
+``--tolerance`` reruns the pairing wider.
+
+Usage: OPENBLAS_NUM_THREADS=1 python studies/split_halves_pool.py [DATA_DIR] [--out pairs.csv]
+(default ../shared/data; about 1 min on one core). docs/validation.md quotes its table.
+"""
+import argparse
+import sys
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+import modaluq
+from modaluq.analysis import Analysis
+from modaluq.harmonics import possible_harmonics
+from modaluq.io import load
+from modaluq.validation import split_halves
+
+Z_95 = 1.959963984540054
+LEVELS = (1, 2, 4, 8)
+
+
+def _npz(file, *, sliced=False):
+    def read(data):
+        d = np.load(data / file)
+        y = d["y"]
+        if sliced:
+            a, b = d["recommended_slice"][:2]
+            y = y[a:b]
+        return np.asarray(y, float), float(d["fs"])
+    return read
+
+
+def _tdms(file):
+    def read(data):
+        rec = load(data / file)
+        return np.asarray(rec.y, float), float(rec.fs)
+    return read
+
+
+#: name: (group, reader, band in Hz). Groups: "measured" (pooled), "earthquake" (not pooled), "simulated".
+RECORDS = {
+    "wind turbine tower": ("measured", _tdms("owi_offshore_wind_turbine_tower_2020.tdms"), (0.2, 5.0)),
+    "sensor array": ("measured", _tdms("owi_sensor_array_with_ambient_2022.tdms"), (1.0, 40.0)),
+    "smartphone slab": ("measured", _npz("cessipy_smartphone_slab.npz", sliced=True), (5.0, 40.0)),
+    "Meloland (earthquake)": ("earthquake", _npz("cesmd_meloland_overpass_2016.npz"), (1.0, 20.0)),
+    "Painter Street (earthquake)": ("earthquake", _npz("cesmd_painter_st_overpass_2016.npz"), (1.0, 15.0)),
+    "koma shear frame": ("simulated", _npz("koma_shearframe_sim.npz"), (0.1, 1.5)),
+    "Lysefjord bridge": ("simulated", _npz("ssicov_lysefjord_bridge_sim.npz"), (0.1, 1.5)),
+}
+
+COLUMNS = ("group", "record", "n_windows", "window", "t0_s", "t1_s", "half_s", "block_rows", "n_blocks", "orders",
+           "f1_hz", "f2_hz", "sigma_f1_hz", "sigma_f2_hz", "xi1", "xi2", "sigma_xi1", "sigma_xi2",
+           "z_f", "z_xi", "z_f_cap", "mac", "harmonic", "rms_ratio")
+
+
+def pairs_of_record(name, data, levels=LEVELS, tolerance=0.02):
+    """Every mode pair of every window of one record (dicts with :data:`COLUMNS`), and the failed windows."""
+    group, read, band = RECORDS[name]
+    y, fs = read(data)
+    T = y.shape[0] / fs
+    rows, failed = [], []
+    for n in levels:
+        for k in range(n):
+            t0, t1 = k * T / n, (k + 1) * T / n
+            a = Analysis.from_arrays(y, fs=fs, settings=modaluq.Settings(frequency_range=band, start=t0, stop=t1))
+            try:
+                check = split_halves(a, max_frequency_difference=tolerance)
+            except ValueError as exc:
+                failed.append((name, n, k, str(exc).splitlines()[0]))
+                continue
+            i0, i1, i2 = (int(round(t * fs)) for t in (t0, 0.5 * (t0 + t1), t1))
+            rms = np.sqrt(np.mean((y[i0:i1] - y[i0:i1].mean(0)) ** 2, 0)), \
+                np.sqrt(np.mean((y[i1:i2] - y[i1:i2].mean(0)) ** 2, 0))
+            ratio = float(np.max(np.maximum(rms[1] / rms[0], rms[0] / rms[1])))
+            f, sf, x, sx = check.frequency_hz, check.frequency_std, check.damping_ratio, check.damping_std
+            every = np.concatenate([f.mean(1), *check.unmatched_hz])
+            xi_every = np.concatenate([x.mean(1), np.full(sum(map(len, check.unmatched_hz)), np.nan)])
+            harmonic = possible_harmonics(y[i0:i2], fs, every, xi_every)[:len(f)] if len(f) else []
+            for m in range(len(f)):
+                rows.append(dict(
+                    group=group, record=name, n_windows=n, window=k, t0_s=t0, t1_s=t1, half_s=(t1 - t0) / 2,
+                    block_rows=check.settings["block_rows"], n_blocks=check.settings["n_blocks"],
+                    orders=check.settings["orders"], f1_hz=f[m, 0], f2_hz=f[m, 1],
+                    sigma_f1_hz=sf[m, 0], sigma_f2_hz=sf[m, 1], xi1=x[m, 0], xi2=x[m, 1],
+                    sigma_xi1=sx[m, 0], sigma_xi2=sx[m, 1], z_f=check.z_frequency[m], z_xi=check.z_damping[m],
+                    z_f_cap=tolerance * f[m].max() / np.hypot(*sf[m]), mac=check.mac[m],
+                    harmonic=bool(harmonic[m]), rms_ratio=ratio))
+    return rows, failed
+
+
+def stats(rows):
+    """Pairs, RMS z, share within ±1.96 and the largest |z|, of f and of ξ."""
+    out = {"pairs": len(rows)}
+    for key in ("z_f", "z_xi"):
+        z = np.array([r[key] for r in rows], float)
+        z = z[np.isfinite(z)]
+        out[f"rms {key}"] = np.sqrt(np.mean(z ** 2)) if z.size else np.nan
+        out[f"within {key}"] = 100 * np.mean(np.abs(z) <= Z_95) if z.size else np.nan
+        out[f"max {key}"] = np.max(np.abs(z)) if z.size else np.nan
+    return out
+
+
+def table_line(label, rows):
+    s = stats(rows)
+    if not s["pairs"]:
+        return f"| {label} | 0 | — | — | — |"
+    return (f"| {label} | {s['pairs']} | {s['rms z_f']:.2f}, {s['rms z_xi']:.2f} | "
+            f"{s['within z_f']:.0f} %, {s['within z_xi']:.0f} % | {s['max z_f']:.1f}, {s['max z_xi']:.1f} |")
+
+
+def print_tables(rows, failed, levels=LEVELS):
+    print("| rows | pairs | RMS z f, ξ | within ±1.96 f, ξ | largest abs(z) f, ξ |")
+    print("|---|---|---|---|---|")
+    for group in ("measured", "simulated", "earthquake"):
+        names = [n for n in RECORDS if RECORDS[n][0] == group and any(r["record"] == n for r in rows)]
+        for name in names:
+            mine = [r for r in rows if r["record"] == name]
+            print(table_line(f"{name}, all windows", mine))
+            for n in levels:
+                print(table_line(f"{name}, {n} window(s)", [r for r in mine if r["n_windows"] == n]))
+        mine = [r for r in rows if r["group"] == group]
+        if group == "measured":
+            print(table_line("**measured, pooled**", mine))
+            print(table_line("measured, pooled, without harmonic-flagged pairs", [r for r in mine if not r["harmonic"]]))
+            print(table_line("measured, pooled, z_f_cap >= 3", [r for r in mine if r["z_f_cap"] >= 3]))
+            print(table_line("measured, pooled, z_f_cap >= 3, without harmonic-flagged pairs",
+                             [r for r in mine if r["z_f_cap"] >= 3 and not r["harmonic"]]))
+            for n in levels:
+                print(table_line(f"measured, {n} window(s) only", [r for r in mine if r["n_windows"] == n]))
+            print(table_line("measured, long halves (1-2 windows)", [r for r in mine if r["n_windows"] <= 2]))
+            print(table_line("measured, short halves (4-8 windows)", [r for r in mine if r["n_windows"] > 2]))
+        elif mine:
+            print(table_line(f"**{group}, pooled**" + (" (not in the measured pool)" if group == "earthquake" else ""),
+                             mine))
+            print(table_line(f"{group}, pooled, z_f_cap >= 3", [r for r in mine if r["z_f_cap"] >= 3]))
+    print()
+    for name, n, k, msg in failed:
+        print(f"failed: {name}, {n} window(s), window {k}: {msg}")
+    worst = sorted((r for r in rows if r["group"] == "measured"),
+                   key=lambda r: -max(abs(r["z_f"]), abs(r["z_xi"])))[:12]
+    print("\nThe largest |z| of the measured records:\n")
+    print("| record | windows | window (s) | f₁, f₂ (Hz) | σ_f₁, σ_f₂ (Hz) | z_f | z_f_cap | ξ₁, ξ₂ | σ_ξ₁, σ_ξ₂ | z_ξ | "
+          "MAC | harmonic | rms ratio |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+    for r in worst:
+        print(f"| {r['record']} | {r['n_windows']} | {r['t0_s']:.0f}-{r['t1_s']:.0f} | {r['f1_hz']:.4f}, {r['f2_hz']:.4f} | "
+              f"{r['sigma_f1_hz']:.2g}, {r['sigma_f2_hz']:.2g} | {r['z_f']:+.2f} | {r['z_f_cap']:.1f} | {r['xi1']:.4f}, {r['xi2']:.4f} | "
+              f"{r['sigma_xi1']:.2g}, {r['sigma_xi2']:.2g} | {r['z_xi']:+.2f} | {r['mac']:.3f} | "
+              f"{'yes' if r['harmonic'] else 'no'} | {r['rms_ratio']:.2f} |")
+
+
+def main(data_dir="../shared/data", out=None, records=tuple(RECORDS), levels=LEVELS, tolerance=0.02):
+    """Run every record of ``records`` at every level of ``levels``, print the tables, write the
+    pairs to ``out`` (CSV) if given; returns (rows, failed)."""
+    data = Path(data_dir)
+    rows, failed = [], []
+    for name in records:
+        if name not in RECORDS:
+            raise ValueError(f"record {name!r}: one of {tuple(RECORDS)}")
+        t = time.perf_counter()
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            r, f = pairs_of_record(name, data, levels, tolerance)
+        rows += r
+        failed += f
+        print(f"{name}: {len(r)} pairs, {len(f)} failed windows, {time.perf_counter() - t:.1f} s", file=sys.stderr)
+    print_tables(rows, failed, levels)
+    if out is not None:
+        import pandas as pd
+
+        pd.DataFrame(rows, columns=COLUMNS).to_csv(out, index=False)
+        print(f"\nwrote {len(rows)} pairs to {out}", file=sys.stderr)
+    return rows, failed
+
+
+if __name__ == "__main__":
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("data_dir", nargs="?", default="../shared/data")
+    p.add_argument("--out", default=None, help="CSV of every pair")
+    p.add_argument("--levels", type=int, nargs="+", default=list(LEVELS), help="numbers of windows (default 1 2 4 8)")
+    p.add_argument("--tolerance", type=float, default=0.02, help="pairing: largest relative frequency difference")
+    args = p.parse_args()
+    main(args.data_dir, args.out, levels=tuple(args.levels), tolerance=args.tolerance)
