@@ -102,7 +102,7 @@ def _envelope_size(disp, alpha, sigma) -> str:
     peak = float(np.max(np.linalg.norm(np.abs(disp.value), axis=1), initial=0.0))
     if peak == 0 or disp.covariance is None:
         return ""
-    return f"; true size up to {100 * sigma * disp.largest_std(alpha) / peak:.2g} % of the largest motion"
+    return f"\n(true size up to {100 * sigma * disp.largest_std(alpha) / peak:.2g} % of the largest motion)"
 
 
 def _title(modes, k, disp, geometry, lag):
@@ -121,16 +121,41 @@ def _title(modes, k, disp, geometry, lag):
         env = f"±{ENVELOPE_SIGMA:g}σ: shape covariance"
     else:
         env = f"±{ENVELOPE_SIGMA:g}σ: per-channel σ, correlations neglected"
-    return f"{head}\n{env}; largest phase lag {lag:.0f}°" + (f" — {geometry.name}" if geometry.name else "")
+    return (f"{geometry.name}\n" if geometry.name else "") + f"{head}\n{env}; largest phase lag {lag:.0f}°"
+
+
+def _half_extents(pts):
+    lo, hi = pts.min(axis=0), pts.max(axis=0)
+    half = 0.5 * (hi - lo)
+    return 0.5 * (lo + hi), np.maximum(half, 0.05 * max(float(half.max()), 1e-12))  # a flat structure keeps some depth
+
+
+def _figsize(geometry, figsize, square, wide, tall):
+    """``figsize`` if given, else by the structure's shape: a long deck gets a wide figure, a tower a
+    tall one (a square figure leaves most of its area empty around them)."""
+    if figsize is not None:
+        return figsize
+    _, half = _half_extents(np.asarray(geometry.coordinates, float))
+    horizontal, vertical = float(max(half[0], half[1])), float(half[2])
+    return wide if horizontal >= 2.5 * vertical else tall if vertical >= 2.5 * horizontal else square
 
 
 def _limits(ax, pts):
-    lo, hi = pts.min(axis=0), pts.max(axis=0)
-    mid, half = 0.5 * (lo + hi), 0.5 * (hi - lo)
-    half = np.maximum(half, 0.05 * max(float(half.max()), 1e-12))  # a flat structure keeps some depth
+    from matplotlib.ticker import MaxNLocator
+
+    mid, half = _half_extents(pts)
     for set_lim, m, h in zip((ax.set_xlim, ax.set_ylim, ax.set_zlim), mid, half):
         set_lim(m - 1.05 * h, m + 1.05 * h)
-    ax.set_box_aspect(tuple(half))
+    # a long, low structure drawn in a box of its own proportions fills little of the axes: zoom
+    # in (a tower gets a tall figure instead, and a zoom would cut its top off)
+    elongation = float(half.max() / np.median(half)) if np.argmax(half) < 2 else 1.0
+    ax.set_box_aspect(tuple(half), zoom=float(np.clip(1.0 + 0.1 * (elongation - 1.0), 1.0, 1.5)))
+    thin = half < 0.15 * half.max()
+    for axis, h, t in zip((ax.xaxis, ax.yaxis, ax.zaxis), half, thin):
+        axis.set_major_locator(MaxNLocator(4))
+        if t:  # a side too short in the drawing for tick labels: its range goes in the axis label
+            axis.set_ticklabels([])
+    return [(m - h, m + h) if t else None for m, h, t in zip(mid, half, thin)]
 
 
 class _Drawing:
@@ -182,15 +207,11 @@ class _Drawing:
         extra = 0.0 if disp.covariance is None else self.factor * self.sigma * float(
             np.sqrt(np.max(np.diagonal(disp.covariance, axis1=1, axis2=2), initial=0.0)))
         pts = np.vstack([xyz, xyz + peak + extra, xyz - peak - extra])
-        _limits(ax, pts)
-        ax.set_xlabel(f"x [{geometry.units}]", fontsize=8)
-        ax.set_ylabel(f"y [{geometry.units}]", fontsize=8)
-        ax.set_zlabel(f"z [{geometry.units}]", fontsize=8)
+        ranges = _limits(ax, pts)
+        for set_label, name, rng in zip((ax.set_xlabel, ax.set_ylabel, ax.set_zlabel), "xyz", ranges):
+            label = f"{name} [{geometry.units}]"
+            set_label(label if rng is None else f"{label} ({rng[0]:.2g} to {rng[1]:.2g})", fontsize=8)
         ax.tick_params(labelsize=7)
-        from matplotlib.ticker import MaxNLocator
-
-        for axis in (ax.xaxis, ax.yaxis, ax.zaxis):
-            axis.set_major_locator(MaxNLocator(4))
 
     def draw(self, alpha):
         xyz = self.geo.coordinates
@@ -206,7 +227,7 @@ class _Drawing:
 
 
 def plot_shape(modes, mode: int, geometry, *, ax=None, scale=None, sigma=ENVELOPE_SIGMA, envelope=True,
-               magnify_envelope=1.0, show_sensors=True, elev=22.0, azim=-60.0, figsize=(6.4, 6.0)):
+               magnify_envelope=1.0, show_sensors=True, elev=22.0, azim=-60.0, figsize=None):
     """Mode ``mode`` (from 1) of ``modes`` on ``geometry`` in 3-D: undeformed faint, deformed at
     the phase of the largest motion, the ±``sigma``σ ellipsoid axes at each moving node (red),
     nodes coloured by the phase of their motion, sensor directions (green arrows).
@@ -230,6 +251,9 @@ def plot_shape(modes, mode: int, geometry, *, ax=None, scale=None, sigma=ENVELOP
     magnify_envelope : float
         Draw the envelope this many times larger than the shape's scale (default 1: true to
         scale; the legend says the factor otherwise), for σ too small to see.
+    figsize : (width, height) in inches, optional
+        Default: 6.4 × 6.0, or 9.6 × 5.6 for a structure at least 2.5 times longer than high
+        (a deck) and 5.6 × 7.6 for one 2.5 times higher than long (a tower).
 
     Returns
     -------
@@ -238,15 +262,20 @@ def plot_shape(modes, mode: int, geometry, *, ax=None, scale=None, sigma=ENVELOP
     sigma = check_real("sigma", sigma, low=0)
     magnify = check_real("magnify_envelope", magnify_envelope, low=0, low_open=True)
     disp = mode_displacements(modes, mode, geometry)
-    if ax is None:
-        fig = StandaloneFigure(figsize=figsize, layout="constrained")
+    own_figure = ax is None
+    if own_figure:
+        fig = StandaloneFigure(figsize=_figsize(geometry, figsize, (6.4, 6.0), (9.6, 5.6), (5.6, 7.6)),
+                               layout="constrained")
         ax = fig.add_subplot(projection="3d")
     fig = ax.figure
     drawing = _Drawing(ax, geometry, disp, scale, sigma, envelope, show_sensors, magnify)
     drawing.draw(peak_phase(disp.value))
     ax.view_init(elev=elev, azim=azim)
     lag = float(np.nanmax(np.abs(drawing.phase), initial=0.0)) if np.any(disp.moving) else 0.0
-    ax.set_title(_title(modes, mode - 1, disp, geometry, lag), fontsize=9)
+    if own_figure:  # constrained layout keeps a suptitle clear of a 3-D axes, not an Axes title
+        fig.suptitle(_title(modes, mode - 1, disp, geometry, lag), fontsize=9)
+    else:
+        ax.set_title(_title(modes, mode - 1, disp, geometry, lag), fontsize=9)
     from matplotlib.cm import ScalarMappable
 
     cb = fig.colorbar(ScalarMappable(norm=drawing.norm, cmap=drawing.cmap), ax=ax, shrink=0.5, pad=0.06,
@@ -263,7 +292,7 @@ def plot_shape(modes, mode: int, geometry, *, ax=None, scale=None, sigma=ENVELOP
         labels.append(f"±{sigma:g}σ ellipsoid axes" + (f" (σ × {magnify:g})" if magnify != 1 else "")
                       + _envelope_size(disp, peak_phase(disp.value), sigma))
     if ax.figure is fig and len(fig.axes) <= 2:  # a figure of its own: the legend below the axes
-        fig.legend(handles, labels, fontsize=7, loc="outside lower center", ncols=3, frameon=False)
+        fig.legend(handles, labels, fontsize=7, loc="outside lower center", ncols=2, frameon=False)
     else:
         ax.legend(handles, labels, fontsize=7, loc="upper left")
     return fig
@@ -271,12 +300,14 @@ def plot_shape(modes, mode: int, geometry, *, ax=None, scale=None, sigma=ENVELOP
 
 def animate_shape(modes, mode: int, geometry, *, path=None, frames: int = 24, fps: float = 12.0, scale=None,
                   sigma=ENVELOPE_SIGMA, envelope=True, magnify_envelope=1.0, show_sensors=False, elev=22.0,
-                  azim=-60.0, figsize=(5.6, 5.0), dpi=80):
+                  azim=-60.0, figsize=None, dpi=80):
     """Mode ``mode`` (from 1) moving over one cycle (``frames`` phases), with the ±σ envelope at each.
 
     ``magnify_envelope`` as in :func:`plot_shape` (the title says it). ``path``: ``.gif``
     (Pillow) or ``.mp4`` (needs ffmpeg; ``ValueError`` naming ``path`` without it), written
-    atomically. Returns the :class:`matplotlib.animation.FuncAnimation`.
+    atomically. ``figsize``: by default from the structure's shape, as in :func:`plot_shape`
+    (5.6 × 5.0, a deck 8.4 × 4.6, a tower 4.6 × 6.4). Returns the
+    :class:`matplotlib.animation.FuncAnimation`.
     """
     from matplotlib.animation import FuncAnimation, writers
 
@@ -293,14 +324,14 @@ def animate_shape(modes, mode: int, geometry, *, path=None, frames: int = 24, fp
     sigma = check_real("sigma", sigma, low=0)
     magnify = check_real("magnify_envelope", magnify_envelope, low=0, low_open=True)
     disp = mode_displacements(modes, mode, geometry)
-    fig = StandaloneFigure(figsize=figsize, layout="constrained")
+    fig = StandaloneFigure(figsize=_figsize(geometry, figsize, (5.6, 5.0), (8.4, 4.6), (4.6, 6.4)), layout="constrained")
     ax = fig.add_subplot(projection="3d")
     drawing = _Drawing(ax, geometry, disp, scale, sigma, envelope, show_sensors, magnify)
     ax.view_init(elev=elev, azim=azim)
     lag = float(np.nanmax(np.abs(drawing.phase), initial=0.0)) if np.any(disp.moving) else 0.0
     title = _title(modes, mode - 1, disp, geometry, lag)
     size = _envelope_size(disp, peak_phase(disp.value), sigma) if disp.covariance is not None and envelope else ""
-    ax.set_title(title + (f" (σ × {magnify:g})" if magnify != 1 else "") + (f"\n±{sigma:g}σ{size[1:]}" if size else ""),
+    fig.suptitle(title + (f" (σ × {magnify:g})" if magnify != 1 else "") + (f"\n±{sigma:g}σ {size[1:]}" if size else ""),
                  fontsize=8)
     start = peak_phase(disp.value)
     phases = start + 2 * np.pi * np.arange(frames) / frames

@@ -67,10 +67,10 @@ def test_static_plot_draws_the_shape_and_its_two_sigma_envelope(beam):
     cov = disp.covariance_at(alpha)
     half = 0.5 * np.linalg.norm(segs[:, 1] - segs[:, 0], axis=1)
     np.testing.assert_allclose(half, factor * 2 * np.sqrt(cov[[1, 2], 2, 2]), rtol=1e-10)
-    assert "±2σ: shape covariance" in ax.get_title() and "mode 1: 2 ± 0.01 Hz" in ax.get_title()
+    assert "±2σ: shape covariance" in fig.get_suptitle() and "mode 1: 2 ± 0.01 Hz" in fig.get_suptitle()
     # the phase lag of the complex shape is in the title (node 2 lags by ~34°)
     lag = abs(math.degrees(np.angle(0.3 + 0.2j)))
-    assert f"largest phase lag {lag:.0f}°" in ax.get_title()
+    assert f"largest phase lag {lag:.0f}°" in fig.get_suptitle()
 
 
 def test_without_covariance_the_channel_sigma_is_used_and_said(beam):
@@ -79,7 +79,7 @@ def test_without_covariance_the_channel_sigma_is_used_and_said(beam):
                                  "mode_shape_std_real": np.array([[0.02], [0.03], [0.0]]),
                                  "mode_shape_std_imag": np.array([[0.01], [0.01], [0.0]])})
     fig = shapes.plot_shape(m, 1, geo)
-    assert "correlations neglected" in fig.axes[0].get_title()
+    assert "correlations neglected" in fig.get_suptitle()
 
 
 def test_bad_mode_and_names_are_refused(beam):
@@ -100,7 +100,7 @@ def test_animation_writes_a_gif_of_one_cycle(beam, tmp_path):
         assert im.n_frames == 8
     # the envelope's true size in the title, the number of the static figure's legend (tested below)
     legend = next(t.get_text() for t in shapes.plot_shape(modes, 1, geo).legends[0].get_texts() if "ellipsoid" in t.get_text())
-    assert anim._fig.axes[0].get_title().endswith("\n±2σ " + legend.split("; ")[1])
+    assert anim._fig.get_suptitle().endswith("\n±2σ " + legend.split("\n")[1])
     assert [p.name for p in tmp_path.iterdir()] == ["m.gif"]  # no temporary left
     with pytest.raises(ValueError, match="as .gif or .mp4"):
         shapes.animate_shape(modes, 1, geo, path=tmp_path / "m.avi")
@@ -126,7 +126,7 @@ def test_selected_modes_methods(chain, tmp_path):
                               "channels": [{"name": n, "node": i + 2, "direction": "y"}
                                            for i, n in enumerate("abc")]})
     fig = sel.plot_shape(1, geometry=geo)
-    assert "shape covariance" in fig.axes[0].get_title()
+    assert "shape covariance" in fig.get_suptitle()
     sel.animate(1, geometry=geo, path=tmp_path / "a.gif", frames=4)
     assert (tmp_path / "a.gif").stat().st_size > 0
 
@@ -144,7 +144,7 @@ def test_result_methods_draw_the_selected_mode_or_a_pole_of_an_order(chain, tmp_
     sel = result.select_modes()
     # by default the selected modes, numbered as print(result) and the tables number them
     fig = result.plot_shape(2, geo)
-    title = fig.axes[0].get_title()
+    title = fig.get_suptitle()
     assert title.startswith(f"mode 2: {sel.frequency_hz[1]:.4g} ± ") and "shape covariance" in title
     cols = [c for c in fig.axes[0].collections if hasattr(c, "_segments3d")]
     deformed = next(c for c in cols if matplotlib.colors.same_color(c.get_color()[0], "tab:blue"))
@@ -155,7 +155,7 @@ def test_result_methods_draw_the_selected_mode_or_a_pole_of_an_order(chain, tmp_
     # order=: a pole of that order, numbered as print(result.at_order(n)), with its own covariance
     m = result.at_order(12)
     fig = result.plot_shape(3, geo, order=12)
-    title = fig.axes[0].get_title()
+    title = fig.get_suptitle()
     assert title.startswith(f"order 12, mode 3: {m.frequency_hz[2]:.4g} ± ") and "shape covariance" in title
     src, k = result._shape_source(3, 12, None, None)
     d = mode_displacements(src, k, geo)
@@ -179,7 +179,7 @@ def test_legend_gives_the_true_size_of_the_envelope(beam):
     top = max(np.linalg.eigvalsh(c)[-1] for c in cov[disp.moving])
     peak = np.max(np.linalg.norm(np.abs(disp.value), axis=1))
     label = next(t.get_text() for t in fig.legends[0].get_texts() if "ellipsoid" in t.get_text())
-    assert label == f"±2σ ellipsoid axes (σ × 10); true size up to {100 * 2 * np.sqrt(top) / peak:.2g} % of the largest motion"
+    assert label == f"±2σ ellipsoid axes (σ × 10)\n(true size up to {100 * 2 * np.sqrt(top) / peak:.2g} % of the largest motion)"
 
 
 def test_without_uncertainty_there_is_no_envelope_and_the_title_says_so(chain):
@@ -192,7 +192,7 @@ def test_without_uncertainty_there_is_no_envelope_and_the_title_says_so(chain):
                               "channels": [{"name": n, "node": i + 2, "direction": "y"}
                                            for i, n in enumerate("abc")]})
     for fig in (result.plot_shape(1, geo), result.plot_shape(1, geo, order=12)):
-        assert "no σ" in fig.axes[0].get_title()  # the selected modes' std are NaN: not a σ
+        assert "no σ" in fig.get_suptitle()  # the selected modes' std are NaN: not a σ
         assert not any("ellipsoid" in t.get_text() for t in fig.legends[0].get_texts())
 
 
@@ -203,3 +203,24 @@ def test_largest_std_is_the_longest_principal_sigma_at_the_phase(beam):
     assert disp.largest_std(math.pi / 2) == pytest.approx(0.01, rel=1e-12)
     assert disp.largest_std(math.pi / 4) == pytest.approx(math.sqrt(0.5 * 0.03**2 + 0.5 * 0.01**2), rel=1e-12)
     assert math.isnan(geo.displacements(modes.mode_shape[:, 0], modes.output_names).largest_std(0.0))
+
+
+def test_default_figure_follows_the_structure_and_thin_sides_carry_their_range_in_the_label(beam):
+    # a deck 40 m long and 1 m wide, a tower 40 m high: wide and tall figures; the deck's width is
+    # too short in the drawing for tick labels, so the axis label gives its range
+    geo, modes = beam
+    nodes = geo.coordinates
+    deck = Geometry.from_dict({"nodes": [[i + 1, 10 * x, y, z] for i, (x, y, z) in enumerate(nodes)],
+                               "lines": [[1, 2], [2, 3], [3, 4]],
+                               "channels": [{"name": n, "node": i + 2, "direction": "z"}
+                                            for i, n in enumerate(modes.output_names)]})
+    tower = Geometry.from_dict({"nodes": [[i + 1, 0.0, 0.0, 10 * x] for i, (x, y, z) in enumerate(nodes)],
+                                "lines": [[1, 2], [2, 3], [3, 4]],
+                                "channels": [{"name": n, "node": i + 2, "direction": "x"}
+                                             for i, n in enumerate(modes.output_names)]})
+    wide, tall = shapes.plot_shape(modes, 1, deck), shapes.plot_shape(modes, 1, tower)
+    assert tuple(wide.get_size_inches()) == (9.6, 5.6) and tuple(tall.get_size_inches()) == (5.6, 7.6)
+    assert tuple(shapes.plot_shape(modes, 1, deck, figsize=(5, 4)).get_size_inches()) == (5, 4)
+    ax = wide.axes[0]
+    assert ax.get_ylabel().startswith("y [m] (") and not any(t.get_text() for t in ax.yaxis.get_ticklabels())
+    assert ax.get_xlabel() == "x [m]"
