@@ -30,6 +30,7 @@ void modaluq::python::bind_identify(py::module_& m) {
         .def_readonly("close_singular_values", &Modes::close_singular_values)
         .def_readonly("noise_coupling", &Modes::noise_coupling)
         .def_readonly("noise_coupled", &Modes::noise_coupled)
+        .def_readonly("block_correlation_scale", &Modes::block_correlation_scale)
         .def_readonly("degenerate", &Modes::degenerate)
         .def_readonly("note", &Modes::note);
 
@@ -63,6 +64,7 @@ void modaluq::python::bind_identify(py::module_& m) {
         .def_readwrite("freeze_noise", &IdentifyOptions::freeze_noise)
         .def_readwrite("noise_floor_factor", &IdentifyOptions::noise_floor_factor)
         .def_readwrite("noise_coupling_limit", &IdentifyOptions::noise_coupling_limit)
+        .def_readwrite("block_correlation_correction", &IdentifyOptions::block_correlation_correction)
         .def("validate", &IdentifyOptions::validate)
         .def_property_readonly_static("max_threads", [](py::object) { return IdentifyOptions::kMaxThreads; })
         .def("layout", &IdentifyOptions::layout, py::arg("n_outputs"), py::arg("n_inputs"));

@@ -207,6 +207,9 @@ class CovarianceAccumulator:
         ...
 class Modes:
     @property
+    def block_correlation_scale(self) -> typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 1]"]:
+        ...
+    @property
     def block_too_short(self) -> typing.Annotated[numpy.typing.NDArray[numpy.bool], "[m, 1]"]:
         ...
     @property
@@ -343,6 +346,7 @@ class SlowDecay:
         ...
 class IdentifyOptions:
     max_threads: typing.ClassVar[int] = 1024
+    block_correlation_correction: bool
     demean: bool
     freeze_noise: bool
     uncertainty: bool

@@ -103,6 +103,14 @@ def identify(y, u=None, *, fs: float, settings: Settings | None = None,
         when the noise directions are frozen is flagged ``Modes.noise_coupled``: it is
         spurious or mixed with a spurious pole, no first-order value is meaningful, and it
         keeps the unfrozen, conservative standard deviations.
+    block_correlation_correction : bool
+        Correct each mode's block covariance for the correlation of adjacent blocks (default
+        False; docs/uq-math.md §3.1): its standard deviations are multiplied by √c,
+        c = max(1/4, 1 + 2ρ), with ρ the lag-1 autocorrelation of its f and ξ block terms plus
+        1/n_blocks, reported per mode as ``block_correlation_scale``. Where a measured input
+        carries most of the excitation, the uncorrected σ grows with ``n_blocks``; corrected,
+        it does not (docs/validation.md, "Issue 27"). One record only (``identify_setups``
+        refuses it).
 
     frequency_range : (float, float), optional
         Band of interest (f_low, f_high) in Hz. The record is decimated (anti-aliased) to a

@@ -179,6 +179,8 @@ class Settings:
     threads: int = _IDENTIFY["threads"]              #: threads of the core (the result does not depend on it)
     freeze_noise: bool = _IDENTIFY["freeze_noise"]   #: hold the noise directions fixed (docs/uq-math.md §5.5)
     noise_coupling_limit: float = _IDENTIFY["noise_coupling_limit"]  #: σ shrink factor that flags a noise-coupled pole
+    #: scale each mode's σ for the correlation of adjacent blocks (docs/uq-math.md §3.1)
+    block_correlation_correction: bool = _IDENTIFY["block_correlation_correction"]
     # preprocessing (preprocess.py), which the core does not know
     frequency_range: Optional[Tuple[float, float]] = None  #: band of interest (f_low, f_high), Hz
     start: Optional[float] = None                    #: window start, s from the first sample
@@ -201,7 +203,7 @@ class Settings:
             put("n_blocks", check_integer("n_blocks", self.n_blocks))
         if self.references is not None:
             put("references", tuple(check_integers("references", self.references, minimum=0)))
-        for name in ("uncertainty", "demean", "freeze_noise"):
+        for name in ("uncertainty", "demean", "freeze_noise", "block_correlation_correction"):
             put(name, check_boolean(name, getattr(self, name)))
         put("input_rcond", check_real("input_rcond", self.input_rcond, low=0, high=1, high_open=True))
         put("threads", check_integer("threads", self.threads, minimum=1, maximum=MAX_THREADS))

@@ -244,4 +244,51 @@ TEST_CASE("each mode's factor rows of f and xi reproduce its covariance's [f, xi
     }
 }
 
+
+TEST_CASE("the block-correlation correction scales each mode by sqrt(c) from its own f and xi block terms") {
+    // c by hand (docs/uq-math.md §3.1): rho_r = sum u(k) u(k+1) / sum u(k)^2, rho = mean + 1/n_b
+    MatrixXd ut = MatrixXd::Zero(4, 4);
+    ut.row(0) << 1, 1, 1, 1;    // rho_f = 3/4
+    ut.row(1) << 1, -1, 1, -1;  // rho_xi = -3/4
+    CHECK(modaluq::detail::block_correlation_scale(ut) == doctest::Approx(1.0 + 2.0 * (0.0 + 0.25)));
+    ut.row(0) = ut.row(1);  // rho = -3/4 + 1/4: c = 0, floored at 1/4
+    CHECK(modaluq::detail::block_correlation_scale(ut) == 0.25);
+    ut.row(0).setZero();  // only xi's row defines rho
+    CHECK(modaluq::detail::block_correlation_scale(ut) == 0.25);
+    ut.row(1).setZero();
+    CHECK(modaluq::detail::block_correlation_scale(ut) == 1.0);
+
+    // identify: the corrected run is the plain one with each mode's factor, covariance and std
+    // scaled by sqrt(c) or c, c recomputed here from the plain run's factor rows
+    const Sim s = simulate(3, {0, 1, 2}, 6000, 21, true, 0.2, 0.05);
+    auto o = options(s.fs, 5, 6, {2, 4, 6, 8, 10}, true);
+    const auto plain = modaluq::identify(s.y, s.u, o);
+    o.block_correlation_correction = true;
+    const auto corrected = modaluq::identify(s.y, s.u, o);
+    const Index nb = plain.n_blocks;
+    Index scaled = 0;
+    for (std::size_t k = 0; k < plain.modes.size(); ++k) {
+        const auto &a = plain.modes[k], &b = corrected.modes[k];
+        REQUIRE(a.n_modes() == b.n_modes());
+        CHECK((a.block_correlation_scale.array() == 1.0).all());
+        CHECK(b.frequency_hz == a.frequency_hz);
+        for (Index i = 0; i < a.n_modes(); ++i) {
+            MatrixXd u(2, nb);
+            u.row(0) = a.frequency_damping_factor.col(i).head(nb).transpose();
+            u.row(1) = a.frequency_damping_factor.col(i).tail(nb).transpose();
+            double rho = 0.0;
+            for (Index r : {0, 1}) rho += u.row(r).head(nb - 1).dot(u.row(r).tail(nb - 1)) / u.row(r).squaredNorm();
+            const double c = std::max(0.25, 1.0 + 2.0 * (rho / 2.0 + 1.0 / double(nb)));
+            CHECK(b.block_correlation_scale(i) == doctest::Approx(c).epsilon(1e-12));
+            CHECK(b.frequency_std(i) == doctest::Approx(std::sqrt(c) * a.frequency_std(i)).epsilon(1e-12));
+            CHECK(b.damping_std(i) == doctest::Approx(std::sqrt(c) * a.damping_std(i)).epsilon(1e-12));
+            CHECK((b.covariance.col(i) - c * a.covariance.col(i)).norm() <= 1e-12 * c * a.covariance.col(i).norm());
+            CHECK((b.frequency_damping_factor.col(i) - std::sqrt(c) * a.frequency_damping_factor.col(i)).norm() <=
+                  1e-12 * a.frequency_damping_factor.col(i).norm());
+            scaled += std::abs(c - 1.0) > 0.05;
+        }
+    }
+    CHECK(scaled > 0);  // the correction did something on this record
+}
+
 }  // namespace test_identify

@@ -275,4 +275,12 @@ TEST_CASE("campaigns that cannot be merged are refused with the reason") {
     }
 }
 
+TEST_CASE("a campaign refuses the block-correlation correction (one record's blocks only)") {
+    Campaign c = make_campaign(false);
+    c.options.block_correlation_correction = true;
+    CHECK_THROWS_WITH_AS(modaluq::identify_setups(c.setups, c.options),
+                         doctest::Contains("block_correlation_correction applies to one record"),
+                         modaluq::invalid_argument);
+}
+
 }  // namespace test_multisetup

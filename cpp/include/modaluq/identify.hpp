@@ -44,6 +44,11 @@ struct IdentifyOptions {
     /// rho_max of (5.14), >= 1: poles whose sigma_f or sigma_xi the noise directions inflate by
     /// more are flagged noise_coupled and keep the unfrozen sigma.
     double noise_coupling_limit = 20.0;
+    /// Correct each mode's block covariance for the correlation of adjacent blocks (docs/uq-math.md
+    /// §3.1): its factor is scaled by sqrt(c), c = max(1/4, 1 + 2 rho), rho the lag-1
+    /// autocorrelation of its f and xi block terms plus 1/n_b. For one record (identify_setups
+    /// refuses it). Off by default; see docs/validation.md ("Issue 27") for where it helps.
+    bool block_correlation_correction = false;
 
     void validate() const {
         detail::require(std::isfinite(fs) && fs > 0.0, "fs must be a finite sampling frequency > 0 Hz, got ", fs);
@@ -198,6 +203,7 @@ inline Modes degenerate_modes(Index order, Index n_outputs, bool with_uncertaint
         m.frequency_damping_correlation.resize(0);
         m.noise_coupling.resize(0);
         m.noise_coupled.resize(0);
+        m.block_correlation_scale.resize(0);
     }
     return m;
 }
@@ -262,7 +268,8 @@ inline Identification identify_with_factor(const Covariances& cov, Eigen::Matrix
         noise.floor_factor = options.noise_floor_factor;
         noise.coupling_limit = options.noise_coupling_limit;
         prop = std::make_unique<UncertaintyPropagator>(re, propagate_to_subspace(sub, cov, std::move(t_r)),
-                                                       L.rows_past(), options.threads, noise);
+                                                       L.rows_past(), options.threads, noise,
+                                                       options.block_correlation_correction);
         out.significant_singular_values = prop->significant_singular_values();
         out.signal_to_noise = re.singular_values()(0) / prop->singular_value_std(0);
         // A statistic of the blocks, so a warning, not a refusal: a short record with real

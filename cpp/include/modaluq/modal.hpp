@@ -63,6 +63,10 @@ struct Modes {
     /// on noise directions (a spurious pole, or a physical one mixed with a spurious one), no
     /// first-order value is meaningful, and its std are the unfrozen, conservative ones.
     Eigen::Array<bool, Eigen::Dynamic, 1> noise_coupled;
+    /// Per mode, the variance factor c of the block-correlation correction (docs/uq-math.md §3.1,
+    /// IdentifyOptions::block_correlation_correction): its factor, covariance and std are sqrt(c)
+    /// and c times the uncorrected ones; 1 when the correction is off.
+    Eigen::VectorXd block_correlation_scale;
     /// No modes at this order: it is above the numerical rank of H, or (A, C) has no usable
     /// eigen-decomposition there (`note` says which). The other orders are unaffected.
     bool degenerate = false;

@@ -186,6 +186,8 @@ inline SetupsIdentification identify_setups(const std::vector<SetupData>& setups
     using detail::cd;
     options.validate();
     detail::require(!setups.empty(), "setups must hold at least one setup");
+    detail::require(!options.block_correlation_correction,
+                    "block_correlation_correction applies to one record (identify), not to a campaign's merge");
     std::sort(options.orders.begin(), options.orders.end());
     options.orders.erase(std::unique(options.orders.begin(), options.orders.end()), options.orders.end());
     const Index ns = static_cast<Index>(setups.size());

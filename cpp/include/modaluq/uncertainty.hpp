@@ -13,6 +13,7 @@
 
 #include <Eigen/Core>
 
+#include <algorithm>
 #include <cmath>
 #include <complex>
 #include <functional>
@@ -45,6 +46,27 @@ inline void resize_mode_uncertainty(Modes& modes, Index l, Index nb) {
     modes.frequency_damping_correlation.resize(nm);
     modes.noise_coupling = Eigen::VectorXd::Ones(nm);
     modes.noise_coupled = Eigen::Array<bool, Eigen::Dynamic, 1>::Constant(nm, false);
+    modes.block_correlation_scale = Eigen::VectorXd::Ones(nm);
+}
+
+/// The variance factor c of the block-correlation correction (docs/uq-math.md §3.1) of one mode
+/// from rows 0 (f) and 1 (xi) of its factor (columns: the blocks in time order):
+/// rho_r = sum_k u_r(k) u_r(k+1) / sum_k u_r(k)^2, rho = mean of the defined rho_r + 1/n_b,
+/// c = max(1/4, 1 + 2 rho). 1 when neither row has a nonzero entry.
+inline double block_correlation_scale(const Eigen::Ref<const Eigen::MatrixXd>& ut) {
+    const Index nb = ut.cols();
+    if (nb < 2) return 1.0;
+    double sum = 0.0;
+    int defined = 0;
+    for (Index r : {0, 1}) {
+        const auto u = ut.row(r);
+        const double s0 = u.squaredNorm();
+        if (!(s0 > 0.0)) continue;
+        sum += u.head(nb - 1).dot(u.tail(nb - 1)) / s0;
+        ++defined;
+    }
+    if (defined == 0) return 1.0;
+    return std::max(0.25, 1.0 + 2.0 * (sum / defined + 1.0 / static_cast<double>(nb)));
 }
 
 /// Mode i's uncertainty from its factor `ut` ((2 + 2l) x n_b, rows f, xi, Re shape, Im shape,
@@ -88,10 +110,11 @@ public:
     /// @param t_h  T_H, (a b) x n_b: column k is vec dH^k (column-major)
     /// @param b    columns of H
     /// @param threads  threads for the per-block work (results do not depend on it)
+    /// @param block_correlation_correction  scale each mode's factor by sqrt(c) (docs/uq-math.md §3.1)
     UncertaintyPropagator(const Realization& re, const Eigen::MatrixXd& t_h, Index b, Index threads = 1,
-                          NoiseOptions noise = {})
+                          NoiseOptions noise = {}, bool block_correlation_correction = false)
         : l_(re.n_outputs()), singular_values_(re.singular_values()), gamma_up_r_(re.gamma_up_r()),
-          nb_(t_h.cols()), noise_(noise) {
+          nb_(t_h.cols()), noise_(noise), block_correction_(block_correlation_correction) {
         const Index a = re.U().rows(), n = re.max_order(), l = re.n_outputs();
         const Index n_sigma = std::min<Index>(n + 1, re.singular_values().size());
         detail::require(t_h.rows() == a * b, "T_H must have a*b rows");
@@ -155,11 +178,15 @@ public:
             detail::eigen_perturbation_blocks(ctx, q_, dlam, dshape);
         }
         for (Index i = 0; i < nm; ++i) {
-            const Eigen::MatrixXd ut =
+            Eigen::MatrixXd ut =
                 (frozen && !modes.noise_coupled(i))
                     ? ut_f[i]
                     : detail::modal_perturbation(ctx.lambda(i), fs, ss.C.cast<cd>() * ctx.phi.col(i),
                                                  modes.reference_component(i), dlam.row(i), dshape[i]);
+            if (block_correction_) {
+                modes.block_correlation_scale(i) = detail::block_correlation_scale(ut);
+                ut *= std::sqrt(modes.block_correlation_scale(i));
+            }
             detail::set_mode_uncertainty(modes, i, ut, block_seconds);
         }
     }
@@ -170,6 +197,7 @@ private:
     Eigen::MatrixXd gamma_up_r_;       ///< R of Gamma_up = Q R at n_max (stage 4's W)
     Index nb_;
     NoiseOptions noise_;
+    bool block_correction_ = false;
     detail::NoiseFloor floor_;
     Eigen::MatrixXd dsigma_;  ///< d sigma_j per block, j < n_max + 1
     detail::BlockQ q_;        ///< Q1..Q4 of every block at n_max

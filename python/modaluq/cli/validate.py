@@ -81,6 +81,8 @@ def run_split_halves(args) -> int:
     try:
         names = ("frequency_range", "start", "stop", "block_rows", "past_block_rows", "n_blocks")
         given = {k: getattr(args, k) for k in names if getattr(args, k) is not None}
+        if args.block_correlation_correction:
+            given["block_correlation_correction"] = True
         settings = Settings(**given, **({"orders": args.order} if args.order is not None else {}))
         analysis = Analysis.from_file(args.split_halves, fs=args.fs, format=args.format,
                                       read_options=parse_read_options(args.read_option), outputs=args.outputs,
@@ -122,6 +124,8 @@ def run(args) -> int:
         check_output_paths([("--out", out / name) for name in names], overwrite=args.overwrite)
     if args.no_freeze_noise:
         given["freeze_noise"] = False
+    if args.block_correlation_correction:
+        given["block_correlation_correction"] = True
     results = monte_carlo(**{**given, "order": orders}, progress=not args.no_progress)
     text = "\n".join(r.report() for r in results)
     if out is not None:
@@ -184,6 +188,9 @@ def register(subparsers) -> None:
                         f"(default {d['noise_coupling_limit']:g})")
     v.add_argument("--no-freeze-noise", action="store_true",
                    help="plain first-order propagation, noise singular vectors free (for comparison)")
+    v.add_argument("--block-correlation-correction", action="store_true",
+                   help="correct each mode's sigma for the correlation of adjacent blocks "
+                        "(docs/uq-math.md §3.1; identify's block_correlation_correction)")
     v.add_argument("--seed", type=integer_option(0), default=None,
                    help=f"seed of the run; record k uses SeedSequence(seed, spawn_key=(k,)) (default {d['seed']})")
     v.add_argument("--processes", type=integer_option(1, MAX_THREADS), default=None,

@@ -234,7 +234,9 @@ def markdown_report(res) -> str:
         + ("noise singular vectors frozen, poles flagged noise-coupled above "
            f"ρ = {s.get('noise_coupling_limit', 20):g} "
            "(docs/uq-math.md §5.5)." if s.get("freeze_noise", True) else
-           "plain first-order propagation (noise singular vectors free, `--no-freeze-noise`)."),
+           "plain first-order propagation (noise singular vectors free, `--no-freeze-noise`).")
+        + (" σ corrected for the correlation of adjacent blocks (`--block-correlation-correction`, "
+           "docs/uq-math.md §3.1)." if s.get("block_correlation_correction", False) else ""),
         f"- Run: {res.elapsed_s:.1f} s wall time, {res.processes} process(es); {res.machine}.",
         f"- Paper: Mellinger, Döhler & Mevel (ISMA 2016), Tables 1 and 2: {PAPER_N_RECORDS:,} records of "
         f"N = {PAPER_N_SAMPLES:,}, order {PAPER_ORDER}; its block rows and number of blocks are not stated.",
