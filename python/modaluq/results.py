@@ -101,6 +101,8 @@ class Modes:
     close_singular_values: bool = False          #: the order cuts significant singular values within 3 std
     noise_coupling: np.ndarray | None = None     #: (n_modes,) σ unfrozen / frozen (docs/uq-math.md §5.5)
     noise_coupled: np.ndarray | None = None      #: (n_modes,) no first-order sigma: unfrozen (large) sigma kept
+    #: (n_modes,) variance factor c of the block-correlation correction (docs/uq-math.md §3.1); 1 when off
+    block_correlation_scale: np.ndarray | None = None
     degenerate: bool = False                     #: no modes: above the numerical rank of H, or A not decomposable
     note: str = ""                               #: why the order is degenerate
 
@@ -140,6 +142,7 @@ class Modes:
             close_singular_values=bool(m.close_singular_values),
             noise_coupling=m.noise_coupling if has_std else None,
             noise_coupled=m.noise_coupled if has_std else None,
+            block_correlation_scale=m.block_correlation_scale if has_std else None,
             degenerate=bool(m.degenerate),
             note=str(m.note),
         )

@@ -68,6 +68,9 @@ def test_refusals(campaign):
     with pytest.raises(ValueError, match="channel 'L1' is measured in setups 0 and 1"):
         modaluq.identify_setups([frames[0], frames[0]], fs=campaign.fs, references=["L3", "R8"], block_rows=10,
                                 orders=[12], n_blocks=12)
+    with pytest.raises(ValueError, match="block_correlation_correction applies to one record"):
+        modaluq.identify_setups(frames, fs=campaign.fs, references=["L3", "R8"], block_rows=10, orders=[12],
+                                n_blocks=12, block_correlation_correction=True)
 
 
 # --------------------------------------------------------------------------- recordings, files, campaigns

@@ -52,7 +52,8 @@ inline void resize_mode_uncertainty(Modes& modes, Index l, Index nb) {
 /// The variance factor c of the block-correlation correction (docs/uq-math.md §3.1) of one mode
 /// from rows 0 (f) and 1 (xi) of its factor (columns: the blocks in time order):
 /// rho_r = sum_k u_r(k) u_r(k+1) / sum_k u_r(k)^2, rho = mean of the defined rho_r + 1/n_b,
-/// c = max(1/4, 1 + 2 rho). 1 when neither row has a nonzero entry.
+/// c = max(1/4, 1 + 2 rho) where |rho| > 2 / sqrt(n_b) (twice rho's sampling std), else 1
+/// (and 1 when neither row has a nonzero entry).
 inline double block_correlation_scale(const Eigen::Ref<const Eigen::MatrixXd>& ut) {
     const Index nb = ut.cols();
     if (nb < 2) return 1.0;
@@ -66,7 +67,9 @@ inline double block_correlation_scale(const Eigen::Ref<const Eigen::MatrixXd>& u
         ++defined;
     }
     if (defined == 0) return 1.0;
-    return std::max(0.25, 1.0 + 2.0 * (sum / defined + 1.0 / static_cast<double>(nb)));
+    const double rho = sum / defined + 1.0 / static_cast<double>(nb);
+    if (!(std::abs(rho) > 2.0 / std::sqrt(static_cast<double>(nb)))) return 1.0;  // the gate
+    return std::max(0.25, 1.0 + 2.0 * rho);
 }
 
 /// Mode i's uncertainty from its factor `ut` ((2 + 2l) x n_b, rows f, xi, Re shape, Im shape,
