@@ -46,7 +46,7 @@ def test_every_study_is_smoke_tested():
                                            "indicators_mc.py", "multisetup_mc.py", "automac_mc.py",
                                            "warnings_issue27.py", "warnings_issue27_premise.py",
                                            "io_block_bias.py", "poser_mc.py", "pyoma2_multisetup.py",
-                                           "split_halves_pool.py"}
+                                           "split_halves_pool.py", "block_scaling_mc.py"}
     assert scripts == tested
 
 
@@ -100,6 +100,22 @@ def test_io_block_bias(capsys):
     out = _module("io_block_bias").main(n_records=3, n_samples=4000, n_reference=20_000)
     assert out["est"]["columns"].shape == (3, 4, 12) and out["K"].shape == (12,)
     assert "| n_blocks | estimator | f: mean σ/σ_MC |" in capsys.readouterr().out
+
+
+def test_block_scaling_mc(capsys, tmp_path):
+    study = _module("block_scaling_mc")
+    out = study.main(n_records=4, out=tmp_path / "run.npz", progress=False)
+    assert set(out) == set(study.CASES)
+    assert out["paper"]["f"].shape == (1, 2, 3, 4, 6) and out["known"]["f"].shape == (2, 2, 2, 4, 6)
+    assert out["known-mid"]["f"].shape == (2, 1, 2, 4, 6) and out["light"]["rho_f"].shape == (2, 1, 2, 4, 6) and out["frame"]["sx"].shape == (1, 2, 3, 4, 4)
+    assert np.isfinite(out["frame"]["rho_f"][0, 1, 0]).all()   # IO, true order: every mode matched
+    text = capsys.readouterr().out
+    assert "| n_b | method | order | σ | f: median σ/σ_MC |" in text and "| cells | estimator | n |" in text
+    loaded, meta = study.load(tmp_path / "run.npz")
+    assert meta["n_records"] == 4 and np.array_equal(loaded["paper"]["sf"], out["paper"]["sf"], equal_nan=True)
+    # the factor: c = max(1/4, 1 + 2 (mean ρ + 1/n_b)); the gate leaves |ρ + 1/n_b| ≤ 2/√n_b alone
+    assert np.allclose(study.scale_factor([0.1, -0.9], [0.3, -0.9], 50), [1 + 2 * 0.22, 0.25])
+    assert np.allclose(study.scale_factor([0.1, 0.5], [0.1, 0.5], 100, gated=True), [1.0, 2.02])
 
 
 def test_poser_mc(capsys):
