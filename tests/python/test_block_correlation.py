@@ -46,15 +46,12 @@ def test_corrected_sigma_is_the_plain_one_times_sqrt_c(runs):
         np.testing.assert_allclose(b.covariance, c[:, None, None] * a.covariance, rtol=1e-10, atol=1e-300)
         changed += int(np.sum(c != 1))
     assert changed > 0  # the gate opened for some poles
-    # the selection reads the corrected σ
-    sa, sb = plain.select_modes(), corrected.select_modes()
-    assert not np.allclose(sa.frequency_std, sb.frequency_std)
 
 
 def test_monte_carlo_carries_the_option_into_its_report():
     from modaluq.validation import monte_carlo
 
-    res = monte_carlo(4, n_samples=3000, order=12, block_rows=10, n_blocks=20, processes=1, progress=False,
-                      n_bootstrap=10, block_correlation_correction=True)
+    res = monte_carlo(5, order=12, block_rows=15, n_blocks=50, processes=1, progress=False, n_bootstrap=20,
+                      block_correlation_correction=True)
     assert res.settings["block_correlation_correction"] is True
     assert "adjacent blocks" in res.report()
