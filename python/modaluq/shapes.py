@@ -151,7 +151,7 @@ def _limits(ax, pts):
     elongation = float(half.max() / np.median(half)) if np.argmax(half) < 2 else 1.0
     ax.set_box_aspect(tuple(half), zoom=float(np.clip(1.0 + 0.1 * (elongation - 1.0), 1.0, 1.5)))
     thin = half < 0.15 * half.max()
-    for axis, h, t in zip((ax.xaxis, ax.yaxis, ax.zaxis), half, thin):
+    for axis, t in zip((ax.xaxis, ax.yaxis, ax.zaxis), thin):
         axis.set_major_locator(MaxNLocator(4))
         if t:  # a side too short in the drawing for tick labels: its range goes in the axis label
             axis.set_ticklabels([])
@@ -324,15 +324,16 @@ def animate_shape(modes, mode: int, geometry, *, path=None, frames: int = 24, fp
     sigma = check_real("sigma", sigma, low=0)
     magnify = check_real("magnify_envelope", magnify_envelope, low=0, low_open=True)
     disp = mode_displacements(modes, mode, geometry)
-    fig = StandaloneFigure(figsize=_figsize(geometry, figsize, (5.6, 5.0), (8.4, 4.6), (4.6, 6.4)), layout="constrained")
+    fig = StandaloneFigure(figsize=_figsize(geometry, figsize, (5.6, 5.0), (8.4, 4.6), (4.6, 6.4)),
+                           layout="constrained")
     ax = fig.add_subplot(projection="3d")
     drawing = _Drawing(ax, geometry, disp, scale, sigma, envelope, show_sensors, magnify)
     ax.view_init(elev=elev, azim=azim)
     lag = float(np.nanmax(np.abs(drawing.phase), initial=0.0)) if np.any(disp.moving) else 0.0
     title = _title(modes, mode - 1, disp, geometry, lag)
     size = _envelope_size(disp, peak_phase(disp.value), sigma) if disp.covariance is not None and envelope else ""
-    fig.suptitle(title + (f" (σ × {magnify:g})" if magnify != 1 else "") + (f"\n±{sigma:g}σ {size[1:]}" if size else ""),
-                 fontsize=8)
+    fig.suptitle(title + (f" (σ × {magnify:g})" if magnify != 1 else "")
+                 + (f"\n±{sigma:g}σ {size[1:]}" if size else ""), fontsize=8)
     start = peak_phase(disp.value)
     phases = start + 2 * np.pi * np.arange(frames) / frames
     anim = FuncAnimation(fig, lambda i: drawing.draw(phases[i]), frames=frames, interval=1000.0 / fps, blit=False)
