@@ -46,7 +46,8 @@ def test_every_study_is_smoke_tested():
                                            "indicators_mc.py", "multisetup_mc.py", "automac_mc.py",
                                            "warnings_issue27.py", "warnings_issue27_premise.py",
                                            "io_block_bias.py", "poser_mc.py", "pyoma2_multisetup.py",
-                                           "split_halves_pool.py", "block_scaling_mc.py"}
+                                           "split_halves_pool.py", "block_scaling_mc.py",
+                                           "above_order_diagnosis.py"}
     assert scripts == tested
 
 
@@ -116,6 +117,20 @@ def test_block_scaling_mc(capsys, tmp_path):
     # the factor: c = max(1/4, 1 + 2 (mean ρ + 1/n_b)); the gate leaves |ρ + 1/n_b| ≤ 2/√n_b alone
     assert np.allclose(study.scale_factor([0.1, -0.9], [0.3, -0.9], 50), [1 + 2 * 0.22, 0.25])
     assert np.allclose(study.scale_factor([0.1, 0.5], [0.1, 0.5], 100, gated=True), [1.0, 2.02])
+
+
+def test_above_order_diagnosis(capsys, tmp_path):
+    study = _module("above_order_diagnosis")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # statistics of 3 records
+        out = study.main(n_records=3, out=tmp_path / "diag.npz", progress=False)
+    assert out["sig_core"].shape == (2, 2, 3, 6, 2) and out["f"].shape == (2, 2, 3, 6)
+    ok = np.isfinite(out["sig_core"]) & ~out["flag"][..., None]
+    assert ok.any() and np.allclose(out["sig_core"][ok], out["sig_blk"][ok], rtol=1e-8, atol=0)
+    # the permuted commutation product equals the oracle's explicit one
+    H = np.random.default_rng(1).standard_normal((6, 4))
+    assert np.allclose(study.jacobian_gamma_h(H, 3, frozen_from=2), study.oracle.jacobian_Gamma_H(H, 3, frozen_from=2))
+    assert "| method | order | mode | n | (a) σ_core | (b) σ_trueH |" in capsys.readouterr().out
 
 
 def test_poser_mc(capsys):
