@@ -47,7 +47,7 @@ def test_every_study_is_smoke_tested():
                                            "warnings_issue27.py", "warnings_issue27_premise.py",
                                            "io_block_bias.py", "poser_mc.py", "pyoma2_multisetup.py",
                                            "split_halves_pool.py", "block_scaling_mc.py",
-                                           "above_order_diagnosis.py"}
+                                           "above_order_diagnosis.py", "partial_unfreeze_mc.py"}
     assert scripts == tested
 
 
@@ -131,6 +131,21 @@ def test_above_order_diagnosis(capsys, tmp_path):
     H = np.random.default_rng(1).standard_normal((6, 4))
     assert np.allclose(study.jacobian_gamma_h(H, 3, frozen_from=2), study.oracle.jacobian_Gamma_H(H, 3, frozen_from=2))
     assert "| method | order | mode | n | (a) σ_core | (b) σ_trueH |" in capsys.readouterr().out
+
+
+def test_partial_unfreeze_mc(capsys, tmp_path):
+    study = _module("partial_unfreeze_mc")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # statistics of 2 records
+        out = study.main(n_records=2, structure="frame", out=tmp_path / "pu.npz", progress=False)
+    assert out["s_frozen"].shape == (2, 2, 2, 4, 2) and out["f"].shape == (2, 2, 2, 4)
+    # κ = 0 is the frozen map, κ = 1 the plain one; at the true order (k* ≥ 8) they coincide
+    a, b = out["s_frozen"], out["s_plain"]
+    assert np.allclose(study.sigma_kappa(a, b, 0.0), a, equal_nan=True)
+    assert np.allclose(study.sigma_kappa(a, b, 1.0), b, equal_nan=True)
+    ok = np.isfinite(a[:, 0]) & (out["k_star"][:, :, None, None] >= 8)
+    assert np.allclose(a[:, 0][ok], b[:, 0][ok], rtol=1e-12)
+    assert "| method | order | mode | n | κ=0 |" in capsys.readouterr().out
 
 
 def test_poser_mc(capsys):

@@ -1,0 +1,238 @@
+"""Issue 27, (f): a candidate fix above the true order, partial unfreezing of the variance.
+
+Above the true order the frozen first-order map (noise directions from k* held fixed, the core's)
+gives σ too small and the unfrozen (plain) map too large (docs/validation.md, Issue 27 (e)). The
+candidate, per pole and per parameter (f and ξ), with each record's OWN block factor T_H (what
+the core has):
+
+    σ_κ² = σ_frozen² + κ (σ_plain² − σ_frozen²),   κ ∈ {0, 0.05, 0.1, 0.2, 0.3, 0.5, 1}
+
+(κ = 0 is the core, κ = 1 the plain map). At orders ≤ k* the two maps coincide, so σ_κ = σ_frozen.
+
+Records as ``modaluq validate`` simulates them (N = 10,000, p = q = 15, n_blocks = 50, record k =
+``modaluq.simulate(N, seed=record_seed(seed, k), **structure)``), each identified output-only (OO)
+and input/output (IO) with the NumPy reference (tests/python/oracle.py, the maps of
+studies/above_order_diagnosis.py), poles matched to the true modes with ``match_modes`` (±5 %);
+poles with ρ = max(σ_plain/σ_frozen over f, ξ) > 20 (those the core flags noise-coupled) are left
+out. Per κ × method × order × mode: median σ_κ/σ_MC, coverage of ±1.96 σ_κ around the Monte Carlo
+mean, RMS z; and per κ × order a pooled line over the modes 2.. (cells in the bands: coverage
+0.93–0.97 and median 0.85–1.18).
+
+Structures: ``chain`` (the paper's 6-DOF chain, true order 12; orders 12, 24, 36) and ``frame``
+(``n_dof=4, input_dofs=(0, 3)``, true order 8; orders 8, 16).
+
+usage: OPENBLAS_NUM_THREADS=1 python studies/partial_unfreeze_mc.py --records 300 --out pu.npz
+       OPENBLAS_NUM_THREADS=1 python studies/partial_unfreeze_mc.py --structure frame --records 300
+       python studies/partial_unfreeze_mc.py --report pu.npz
+"""
+from __future__ import annotations
+
+import argparse
+import pathlib
+import sys
+import time
+
+import numpy as np
+
+from modaluq.simulate import simulate
+from modaluq.validation.montecarlo import match_modes, record_seed
+
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "tests" / "python"))
+from above_order_diagnosis import jacobian_gamma_h  # noqa: E402
+
+import oracle  # noqa: E402
+
+N_SAMPLES = 10_000
+P = 15
+N_BLOCKS = 50
+METHODS = ("OO", "IO")
+LIMIT = 20.0                     # noise_coupling_limit (the core's default)
+KAPPAS = (0.0, 0.05, 0.1, 0.2, 0.3, 0.5, 1.0)
+STRUCTURES = {"chain": (dict(), (12, 24, 36)),
+              "frame": (dict(n_dof=4, input_dofs=(0, 3)), (8, 16))}
+COVERAGE_BAND = (0.93, 0.97)
+MEDIAN_BAND = (0.85, 1.18)
+
+
+def record_sigmas(y, u, fs, orders):
+    """k* and per order the oracle's f, ξ and σ of the frozen and the plain map, both with the
+    record's own block factor T_H: σ arrays n_modes × 2 (f, ξ)."""
+    cov = oracle.covariances(y, u, P, P, N_BLOCKS)
+    R = [cov[k] for k in ("R1", "R2", "R3", "R4")]
+    H = oracle.subspace_matrix(*R)
+    T_H = oracle.jacobian_H_R(*R) @ cov["T_R"]
+    l = y.shape[1]
+    n_max = max(orders)
+    k_star, _ = oracle.noise_floor(H, T_H, n_max + 1)
+    JT_plain = jacobian_gamma_h(H, n_max) @ T_H
+    JT_frozen = jacobian_gamma_h(H, n_max, frozen_from=k_star) @ T_H if k_star < n_max else JT_plain
+    U, s, _ = oracle.svd_sorted(H)
+    out = {"k_star": k_star}
+    for n in orders:
+        G = U[:, :n] * np.sqrt(s[:n])
+        A, C = oracle.system_matrices(G, l)
+        md = oracle.modes(A, C, fs)
+        J_AC = oracle.jacobian_AC_Gamma(G, l)
+        J_th = oracle.jacobian_theta_AC(A, C, fs, ref_index=md["ref_index"])
+        rows = np.vstack([J[:2] for J in J_th]) @ J_AC                      # 2 nm × a n
+        a_n = G.size
+        nm = len(J_th)
+        plain = np.linalg.norm(rows @ JT_plain[:a_n], axis=-1).reshape(nm, 2)
+        frozen = np.linalg.norm(rows @ JT_frozen[:a_n], axis=-1).reshape(nm, 2) if n > k_star else plain
+        out[n] = {"f": md["frequency_hz"], "xi": md["damping_ratio"], "frozen": frozen, "plain": plain}
+    return out
+
+
+def run(n_records, structure="chain", seed=0, progress=True, max_seconds=None):
+    """Simulate and identify; arrays method × order × record × mode [× 2]. With ``max_seconds``,
+    stops after the record that crosses it (the arrays are cut to the records done)."""
+    kw, orders = STRUCTURES[structure]
+    truth = simulate(N_SAMPLES, seed=record_seed(seed, 0), **kw)
+    nt = truth.frequency_hz.size
+    M, O, R = len(METHODS), len(orders), n_records
+    nan = np.full((M, O, R, nt), np.nan)
+    res = {"f": nan.copy(), "xi": nan.copy(), "rho": nan.copy(),
+           "s_frozen": np.full((M, O, R, nt, 2), np.nan), "s_plain": np.full((M, O, R, nt, 2), np.nan),
+           "k_star": np.zeros((M, R), int)}
+    t0 = time.perf_counter()
+    done = 0
+    for k in range(R):
+        sim = simulate(N_SAMPLES, seed=record_seed(seed, k), **kw)
+        for m, u in enumerate((None, sim.u)):
+            rec = record_sigmas(sim.y, u, sim.fs, orders)
+            res["k_star"][m, k] = rec["k_star"]
+            for o, n in enumerate(orders):
+                md = rec[n]
+                idx = match_modes(md["f"], truth.frequency_hz)
+                for i in np.flatnonzero(idx >= 0):
+                    j = idx[i]
+                    res["f"][m, o, k, i], res["xi"][m, o, k, i] = md["f"][j], md["xi"][j]
+                    res["s_frozen"][m, o, k, i], res["s_plain"][m, o, k, i] = md["frozen"][j], md["plain"][j]
+        done = k + 1
+        el = time.perf_counter() - t0
+        if progress and (k == 0 or done % 10 == 0):
+            print(f"record {done}/{R}: {el:.0f} s ({el / done:.2f} s/record)", file=sys.stderr, flush=True)
+        if max_seconds is not None and el > max_seconds:
+            break
+    for key in ("f", "xi", "rho", "s_frozen", "s_plain"):
+        res[key] = res[key][:, :, :done]
+    res["k_star"] = res["k_star"][:, :done]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        res["rho"] = np.maximum(1.0, np.max(res["s_plain"] / res["s_frozen"], axis=-1))
+    res["orders"] = np.array(orders)
+    res["kappas"] = np.array(KAPPAS)
+    res["structure"] = np.array(structure)
+    res["true_f"], res["true_xi"] = truth.frequency_hz, truth.damping_ratio
+    res["seconds"] = time.perf_counter() - t0
+    return res
+
+
+def sigma_kappa(s_frozen, s_plain, kappa):
+    """σ_κ = sqrt(σ_frozen² + κ (σ_plain² − σ_frozen²))."""
+    return np.sqrt(s_frozen ** 2 + kappa * (s_plain ** 2 - s_frozen ** 2))
+
+
+def _stats(x, s):
+    """median σ/σ_MC, coverage of ±1.96 σ, RMS z over the finite entries of x (records) and s."""
+    ok = np.isfinite(x) & np.isfinite(s) & (s > 0)
+    x, s = x[ok], s[ok]
+    if x.size < 3:
+        return np.nan, np.nan, np.nan, x.size
+    sd = x.std(ddof=1)
+    z = (x - x.mean()) / s
+    return np.median(s) / sd, np.mean(np.abs(z) <= 1.96), np.sqrt(np.mean(z * z)), x.size
+
+
+def table(res):
+    """stats[κ, method, order, mode, var] = (median, coverage, RMS z, n)."""
+    K, (M, O, _, nt) = len(res["kappas"]), res["f"].shape
+    st = np.full((K, M, O, nt, 2, 4), np.nan)
+    for c, kap in enumerate(res["kappas"]):
+        sig = sigma_kappa(res["s_frozen"], res["s_plain"], kap)
+        for m in range(M):
+            for o in range(O):
+                for i in range(nt):
+                    keep = res["rho"][m, o, :, i] <= LIMIT
+                    for v, key in enumerate(("f", "xi")):
+                        x = np.where(keep, res[key][m, o, :, i], np.nan)
+                        st[c, m, o, i, v] = _stats(x, sig[m, o, :, i, v])
+    return st
+
+
+def _in_band(med, cov):
+    return ((COVERAGE_BAND[0] <= cov) & (cov <= COVERAGE_BAND[1])
+            & (MEDIAN_BAND[0] <= med) & (med <= MEDIAN_BAND[1]))
+
+
+def report(res):
+    orders, kappas = [int(n) for n in res["orders"]], res["kappas"]
+    M, O, R, nt = res["f"].shape
+    st = table(res)
+    lines = [f"structure {res['structure']}, {R} records; poles with ρ > {LIMIT:g} left out (counts in 'n').", ""]
+    # check: at orders ≤ k* the maps coincide
+    for o, n in enumerate(orders):
+        below = res["k_star"][:, None, :, None] >= n                              # M × 1 × R × 1
+        a, b = res["s_frozen"][:, o], res["s_plain"][:, o]
+        ok = np.isfinite(a[..., 0]) & below[:, 0]
+        if ok.any():
+            d = np.abs(b[ok] / a[ok] - 1).max()
+            lines.append(f"order {n}: {int(ok.sum())} poles of records with k* ≥ {n}: max |σ_plain/σ_frozen − 1| = {d:.1e}")
+    ks = {meth: np.bincount(res["k_star"][m]) for m, meth in enumerate(METHODS)}
+    lines.append("k* over records: " + "; ".join(
+        f"{meth}: " + ", ".join(f"{v}×{c}" for v, c in enumerate(b) if c) for meth, b in ks.items()))
+    lines.append("")
+    head = " | ".join(f"κ={k:g}" for k in kappas)
+    for v, name in ((0, "f"), (1, "ξ")):
+        lines.append(f"**{name}**: median σ_κ/σ_MC · coverage of ±1.96 σ_κ · RMS z")
+        lines.append("")
+        lines.append(f"| method | order | mode | n | {head} |")
+        lines.append("|---|---|---|---|" + "---|" * len(kappas))
+        for m, meth in enumerate(METHODS):
+            for o, n in enumerate(orders):
+                for i in range(nt):
+                    cells = [f"{st[c, m, o, i, v, 0]:.2f} · {st[c, m, o, i, v, 1]:.2f} · {st[c, m, o, i, v, 2]:.2f}"
+                             for c in range(len(kappas))]
+                    lines.append(f"| {meth} | {n} | {i + 1} | {int(st[0, m, o, i, v, 3])} | " + " | ".join(cells) + " |")
+        lines.append("")
+    lines.append(f"Pooled, modes 2–{nt}, OO and IO, f and ξ: cells in the bands (coverage "
+                 f"{COVERAGE_BAND[0]:.2f}–{COVERAGE_BAND[1]:.2f} and median {MEDIAN_BAND[0]:.2f}–{MEDIAN_BAND[1]:.2f}) "
+                 "/ cells; worst coverage; range of RMS z")
+    lines.append("")
+    lines.append("| κ | " + " | ".join(f"order {n}" for n in orders) + " |")
+    lines.append("|---|" + "---|" * O)
+    for c, kap in enumerate(kappas):
+        cells = []
+        for o in range(O):
+            s = st[c, :, o, 1:, :, :]                                                # M × modes × 2 × 4
+            med, cov, rz = s[..., 0].ravel(), s[..., 1].ravel(), s[..., 2].ravel()
+            ok = np.isfinite(med)
+            inb = int(_in_band(med[ok], cov[ok]).sum())
+            cells.append(f"{inb}/{int(ok.sum())}; cov ≥ {np.nanmin(cov):.2f}; RMS z {np.nanmin(rz):.2f}–{np.nanmax(rz):.2f}")
+        lines.append(f"| {kap:g} | " + " | ".join(cells) + " |")
+    lines.append("")
+    return "\n".join(lines)
+
+
+def main(n_records=100, structure="chain", seed=0, out=None, progress=True, max_seconds=None):
+    res = run(n_records, structure=structure, seed=seed, progress=progress, max_seconds=max_seconds)
+    if out is not None:
+        np.savez_compressed(out, **res)
+    print(report(res))
+    return res
+
+
+if __name__ == "__main__":
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--records", type=int, default=100)
+    ap.add_argument("--structure", choices=sorted(STRUCTURES), default="chain")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--max-seconds", type=float, help="stop after the record that crosses this wall time")
+    ap.add_argument("--out", type=pathlib.Path)
+    ap.add_argument("--report", type=pathlib.Path, help="reprint the tables of a saved run")
+    args = ap.parse_args()
+    if args.report:
+        with np.load(args.report) as z:
+            print(report({k: z[k] for k in z.files}))
+    else:
+        main(args.records, args.structure, args.seed, args.out, max_seconds=args.max_seconds)
