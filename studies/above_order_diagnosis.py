@@ -79,7 +79,7 @@ def jacobian_gamma_h(H, n, frozen_from=None):
     return J
 
 
-def record_maps(y, u, fs):
+def record_maps(y, u, fs, orders=ORDERS):
     """H (vec), T_H, k* and per order: the oracle's frequencies and the (f, ξ) rows of the frozen
     and the plain map (n_modes × 2 × h) of one record and method."""
     cov = oracle.covariances(y, u, P, P, N_BLOCKS)
@@ -87,13 +87,13 @@ def record_maps(y, u, fs):
     H = oracle.subspace_matrix(*R)
     T_H = oracle.jacobian_H_R(*R) @ cov["T_R"]
     l = y.shape[1]
-    n_max = max(ORDERS)
+    n_max = max(orders)
     k_star, _ = oracle.noise_floor(H, T_H, n_max + 1)
     J_plain = jacobian_gamma_h(H, n_max)
     J_frozen = jacobian_gamma_h(H, n_max, frozen_from=k_star) if k_star < n_max else J_plain
     U, s, _ = oracle.svd_sorted(H)
     out = {"H": oracle.vec(H), "T_H": T_H, "k_star": k_star}
-    for n in ORDERS:
+    for n in orders:
         G = U[:, :n] * np.sqrt(s[:n])
         A, C = oracle.system_matrices(G, l)
         md = oracle.modes(A, C, fs)

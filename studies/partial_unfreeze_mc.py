@@ -38,14 +38,10 @@ from modaluq.simulate import simulate
 from modaluq.validation.montecarlo import match_modes, record_seed
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
-sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "tests" / "python"))
-from above_order_diagnosis import jacobian_gamma_h  # noqa: E402
-
-import oracle  # noqa: E402
+# the oracle's maps of each record, with its p = q = 15 and 50 blocks (studies/above_order_diagnosis.py)
+from above_order_diagnosis import _stats, record_maps  # noqa: E402
 
 N_SAMPLES = 10_000
-P = 15
-N_BLOCKS = 50
 METHODS = ("OO", "IO")
 LIMIT = 20.0                     # noise_coupling_limit (the core's default)
 KAPPAS = (0.0, 0.05, 0.1, 0.2, 0.3, 0.5, 1.0)
@@ -58,29 +54,12 @@ MEDIAN_BAND = (0.85, 1.18)
 def record_sigmas(y, u, fs, orders):
     """k* and per order the oracle's f, ξ and σ of the frozen and the plain map, both with the
     record's own block factor T_H: σ arrays n_modes × 2 (f, ξ)."""
-    cov = oracle.covariances(y, u, P, P, N_BLOCKS)
-    R = [cov[k] for k in ("R1", "R2", "R3", "R4")]
-    H = oracle.subspace_matrix(*R)
-    T_H = oracle.jacobian_H_R(*R) @ cov["T_R"]
-    l = y.shape[1]
-    n_max = max(orders)
-    k_star, _ = oracle.noise_floor(H, T_H, n_max + 1)
-    JT_plain = jacobian_gamma_h(H, n_max) @ T_H
-    JT_frozen = jacobian_gamma_h(H, n_max, frozen_from=k_star) @ T_H if k_star < n_max else JT_plain
-    U, s, _ = oracle.svd_sorted(H)
-    out = {"k_star": k_star}
+    rec = record_maps(y, u, fs, orders)
+    out = {"k_star": rec["k_star"]}
     for n in orders:
-        G = U[:, :n] * np.sqrt(s[:n])
-        A, C = oracle.system_matrices(G, l)
-        md = oracle.modes(A, C, fs)
-        J_AC = oracle.jacobian_AC_Gamma(G, l)
-        J_th = oracle.jacobian_theta_AC(A, C, fs, ref_index=md["ref_index"])
-        rows = np.vstack([J[:2] for J in J_th]) @ J_AC                      # 2 nm × a n
-        a_n = G.size
-        nm = len(J_th)
-        plain = np.linalg.norm(rows @ JT_plain[:a_n], axis=-1).reshape(nm, 2)
-        frozen = np.linalg.norm(rows @ JT_frozen[:a_n], axis=-1).reshape(nm, 2) if n > k_star else plain
-        out[n] = {"f": md["frequency_hz"], "xi": md["damping_ratio"], "frozen": frozen, "plain": plain}
+        md = rec[n]
+        out[n] = {"f": md["f"], "xi": md["xi"], "frozen": np.linalg.norm(md["frozen"] @ rec["T_H"], axis=-1),
+                  "plain": np.linalg.norm(md["plain"] @ rec["T_H"], axis=-1)}
     return out
 
 
@@ -131,17 +110,6 @@ def run(n_records, structure="chain", seed=0, progress=True, max_seconds=None):
 def sigma_kappa(s_frozen, s_plain, kappa):
     """σ_κ = sqrt(σ_frozen² + κ (σ_plain² − σ_frozen²))."""
     return np.sqrt(s_frozen ** 2 + kappa * (s_plain ** 2 - s_frozen ** 2))
-
-
-def _stats(x, s):
-    """median σ/σ_MC, coverage of ±1.96 σ, RMS z over the finite entries of x (records) and s."""
-    ok = np.isfinite(x) & np.isfinite(s) & (s > 0)
-    x, s = x[ok], s[ok]
-    if x.size < 3:
-        return np.nan, np.nan, np.nan, x.size
-    sd = x.std(ddof=1)
-    z = (x - x.mean()) / s
-    return np.median(s) / sd, np.mean(np.abs(z) <= 1.96), np.sqrt(np.mean(z * z)), x.size
 
 
 def table(res):
