@@ -105,9 +105,10 @@ def identify(y, u=None, *, fs: float, settings: Settings | None = None,
         keeps the unfrozen, conservative standard deviations.
     block_correlation_correction : bool
         Correct each mode's block covariance for the correlation of adjacent blocks (default
-        False; docs/uq-math.md §3.1): its standard deviations are multiplied by √c,
-        c = max(1/4, 1 + 2ρ), with ρ the lag-1 autocorrelation of its f and ξ block terms plus
-        1/n_blocks, reported per mode as ``block_correlation_scale``. Where a measured input
+        False; docs/uq-math.md §3.1): where |ρ| > 2/√n_blocks, its standard deviations are
+        multiplied by √c, c = max(1/4, 1 + 2ρ), with ρ the lag-1 autocorrelation of its f and ξ
+        block terms plus 1/n_blocks (c = 1 otherwise), reported per mode as
+        ``block_correlation_scale``. Where a measured input
         carries most of the excitation, the uncorrected σ grows with ``n_blocks``; corrected,
         it does not (docs/validation.md, "Issue 27"). One record only (``identify_setups``
         refuses it).
