@@ -31,6 +31,7 @@ void modaluq::python::bind_identify(py::module_& m) {
         .def_readonly("noise_coupling", &Modes::noise_coupling)
         .def_readonly("noise_coupled", &Modes::noise_coupled)
         .def_readonly("block_correlation_scale", &Modes::block_correlation_scale)
+        .def_readonly("bootstrapped", &Modes::bootstrapped)
         .def_readonly("degenerate", &Modes::degenerate)
         .def_readonly("note", &Modes::note);
 
@@ -65,8 +66,11 @@ void modaluq::python::bind_identify(py::module_& m) {
         .def_readwrite("noise_floor_factor", &IdentifyOptions::noise_floor_factor)
         .def_readwrite("noise_coupling_limit", &IdentifyOptions::noise_coupling_limit)
         .def_readwrite("block_correlation_correction", &IdentifyOptions::block_correlation_correction)
+        .def_readwrite("bootstrap_draws", &IdentifyOptions::bootstrap_draws)
         .def("validate", &IdentifyOptions::validate)
         .def_property_readonly_static("max_threads", [](py::object) { return IdentifyOptions::kMaxThreads; })
+        .def_property_readonly_static("min_bootstrap_draws",
+                                      [](py::object) { return IdentifyOptions::kMinBootstrapDraws; })
         .def("layout", &IdentifyOptions::layout, py::arg("n_outputs"), py::arg("n_inputs"));
 
     py::class_<Identification>(m, "Identification")

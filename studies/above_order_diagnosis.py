@@ -263,23 +263,46 @@ def report(res):
     return "\n".join(lines)
 
 
-def main(n_records=100, seed=0, out=None, progress=True):
-    res = run(n_records, seed=seed, progress=progress)
+def record_done(k, n_records, t0, progress=True, max_seconds=None):
+    """After record k (0-based) of a run started at ``t0`` (perf_counter): prints the progress
+    every 10 records when asked; True when the run should stop (``max_seconds`` crossed)."""
+    done, el = k + 1, time.perf_counter() - t0
+    if progress and (k == 0 or done % 10 == 0):
+        print(f"record {done}/{n_records}: {el:.0f} s ({el / done:.2f} s/record)", file=sys.stderr, flush=True)
+    return max_seconds is not None and el > max_seconds
+
+
+def study_parser(doc):
+    """The options every Monte Carlo study here has: --records, --seed, --out, --report."""
+    ap = argparse.ArgumentParser(description=doc.split("\n")[0])
+    ap.add_argument("--records", type=int, default=100)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--out", type=pathlib.Path)
+    ap.add_argument("--report", type=pathlib.Path, help="reprint the tables of a saved run")
+    return ap
+
+
+def finish(res, out, report):
+    """A study's run done: saved to ``out`` (npz) when given, its tables printed; returns it."""
     if out is not None:
         np.savez_compressed(out, **res)
     print(report(res))
     return res
 
 
+def reprint(path, report):
+    """The tables of a run saved by :func:`finish` again."""
+    with np.load(path) as z:
+        print(report({k: z[k] for k in z.files}))
+
+
+def main(n_records=100, seed=0, out=None, progress=True):
+    return finish(run(n_records, seed=seed, progress=progress), out, report)
+
+
 if __name__ == "__main__":
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--records", type=int, default=100)
-    ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--out", type=pathlib.Path)
-    ap.add_argument("--report", type=pathlib.Path, help="reprint the tables of a saved run")
-    args = ap.parse_args()
+    args = study_parser(__doc__).parse_args()
     if args.report:
-        with np.load(args.report) as z:
-            print(report({k: z[k] for k in z.files}))
+        reprint(args.report, report)
     else:
         main(args.records, args.seed, args.out)

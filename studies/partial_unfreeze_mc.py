@@ -27,7 +27,6 @@ usage: OPENBLAS_NUM_THREADS=1 python studies/partial_unfreeze_mc.py --records 30
 """
 from __future__ import annotations
 
-import argparse
 import pathlib
 import sys
 import time
@@ -39,7 +38,7 @@ from modaluq.validation.montecarlo import match_modes, record_seed
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
 # the oracle's maps of each record, with its p = q = 15 and 50 blocks (studies/above_order_diagnosis.py)
-from above_order_diagnosis import _stats, record_maps  # noqa: E402
+from above_order_diagnosis import _stats, finish, record_done, record_maps, reprint, study_parser  # noqa: E402
 
 N_SAMPLES = 10_000
 METHODS = ("OO", "IO")
@@ -89,10 +88,7 @@ def run(n_records, structure="chain", seed=0, progress=True, max_seconds=None):
                     res["f"][m, o, k, i], res["xi"][m, o, k, i] = md["f"][j], md["xi"][j]
                     res["s_frozen"][m, o, k, i], res["s_plain"][m, o, k, i] = md["frozen"][j], md["plain"][j]
         done = k + 1
-        el = time.perf_counter() - t0
-        if progress and (k == 0 or done % 10 == 0):
-            print(f"record {done}/{R}: {el:.0f} s ({el / done:.2f} s/record)", file=sys.stderr, flush=True)
-        if max_seconds is not None and el > max_seconds:
+        if record_done(k, R, t0, progress, max_seconds):
             break
     for key in ("f", "xi", "rho", "s_frozen", "s_plain"):
         res[key] = res[key][:, :, :done]
@@ -183,24 +179,16 @@ def report(res):
 
 
 def main(n_records=100, structure="chain", seed=0, out=None, progress=True, max_seconds=None):
-    res = run(n_records, structure=structure, seed=seed, progress=progress, max_seconds=max_seconds)
-    if out is not None:
-        np.savez_compressed(out, **res)
-    print(report(res))
-    return res
+    return finish(run(n_records, structure=structure, seed=seed, progress=progress, max_seconds=max_seconds),
+                  out, report)
 
 
 if __name__ == "__main__":
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--records", type=int, default=100)
+    ap = study_parser(__doc__)
     ap.add_argument("--structure", choices=sorted(STRUCTURES), default="chain")
-    ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--max-seconds", type=float, help="stop after the record that crosses this wall time")
-    ap.add_argument("--out", type=pathlib.Path)
-    ap.add_argument("--report", type=pathlib.Path, help="reprint the tables of a saved run")
     args = ap.parse_args()
     if args.report:
-        with np.load(args.report) as z:
-            print(report({k: z[k] for k in z.files}))
+        reprint(args.report, report)
     else:
         main(args.records, args.structure, args.seed, args.out, max_seconds=args.max_seconds)

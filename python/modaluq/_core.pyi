@@ -8,7 +8,7 @@ import collections.abc
 import numpy
 import numpy.typing
 import typing
-__all__: list[str] = ['ClusterStd', 'ClusteringOptions', 'CovarianceAccumulator', 'CovarianceAccumulatorState', 'Covariances', 'Diagram', 'DropReason', 'HankelLayout', 'Identification', 'IdentificationWarning', 'IdentifyOptions', 'IndicatorStatistics', 'Linkage', 'Modes', 'NumericalError', 'PoleStatus', 'Poles', 'SelectedModes', 'SetupData', 'SetupsIdentification', 'SlowDecay', 'StabilityCriteria', 'blas_library', 'builds', 'cluster_labels', 'compute_covariances', 'cpu_path', 'eigen_simd', 'eigen_version', 'identify', 'identify_covariances', 'identify_setups', 'mean_phase_deviation', 'modal_assurance', 'modal_assurance_criterion', 'modal_assurance_statistics', 'modal_phase_collinearity', 'modal_phase_collinearity_statistics', 'poles_of', 'select_modes', 'stabilization_diagram', 'uses_blas']
+__all__: list[str] = ['ClusterStd', 'ClusteringOptions', 'CovarianceAccumulator', 'CovarianceAccumulatorState', 'Covariances', 'Diagram', 'DropReason', 'HankelLayout', 'Identification', 'IdentificationWarning', 'IdentifyOptions', 'IndicatorStatistics', 'Linkage', 'Modes', 'NumericalError', 'PoleStatus', 'Poles', 'PoserOptions', 'PoserResult', 'PoserSetupModes', 'SelectedModes', 'SetupData', 'SetupsIdentification', 'SlowDecay', 'StabilityCriteria', 'blas_library', 'builds', 'cluster_labels', 'compute_covariances', 'cpu_path', 'eigen_simd', 'eigen_version', 'identify', 'identify_covariances', 'identify_setups', 'mean_phase_deviation', 'modal_assurance', 'modal_assurance_criterion', 'modal_assurance_statistics', 'modal_phase_collinearity', 'modal_phase_collinearity_statistics', 'poles_of', 'poser_merge', 'select_modes', 'stabilization_diagram', 'uses_blas']
 class NumericalError(ArithmeticError):
     pass
 class HankelLayout:
@@ -213,6 +213,9 @@ class Modes:
     def block_too_short(self) -> typing.Annotated[numpy.typing.NDArray[numpy.bool], "[m, 1]"]:
         ...
     @property
+    def bootstrapped(self) -> typing.Annotated[numpy.typing.NDArray[numpy.bool], "[m, 1]"]:
+        ...
+    @property
     def close_singular_values(self) -> bool:
         ...
     @property
@@ -346,6 +349,7 @@ class SlowDecay:
         ...
 class IdentifyOptions:
     max_threads: typing.ClassVar[int] = 1024
+    min_bootstrap_draws: typing.ClassVar[int] = 10
     block_correlation_correction: bool
     demean: bool
     freeze_noise: bool
@@ -361,6 +365,12 @@ class IdentifyOptions:
         ...
     @block_rows.setter
     def block_rows(self, arg0: typing.SupportsInt | typing.SupportsIndex) -> None:
+        ...
+    @property
+    def bootstrap_draws(self) -> int:
+        ...
+    @bootstrap_draws.setter
+    def bootstrap_draws(self, arg0: typing.SupportsInt | typing.SupportsIndex) -> None:
         ...
     @property
     def fs(self) -> float:
@@ -1218,7 +1228,7 @@ class PoserResult:
     def reference_p_value(self) -> typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, n]"]:
         ...
     @property
-    def reference_rejected(self) -> typing.Annotated[numpy.typing.NDArray[numpy.bool_], "[m, n]"]:
+    def reference_rejected(self) -> typing.Annotated[numpy.typing.NDArray[numpy.bool], "[m, n]"]:
         ...
     @property
     def reference_z(self) -> list[typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, n]"]]:

@@ -203,7 +203,8 @@ class Cost(NamedTuple):
 
 
 def estimate_cost(n_samples: int, n_outputs: int, n_inputs: int, *, block_rows: int, past_block_rows=None,
-                  n_references=None, orders, n_blocks, uncertainty: bool = True, threads: int = 1) -> Cost:
+                  n_references=None, orders, n_blocks, uncertainty: bool = True, threads: int = 1,
+                  bootstrap_draws: int = 0) -> Cost:
     """Conservative estimate of the peak memory (and a rough time) of one identification.
 
     From the sizes the core allocates (cpp/include/modaluq, docs/settings.md "Memory"), with
@@ -215,7 +216,9 @@ def estimate_cost(n_samples: int, n_outputs: int, n_inputs: int, *, block_rows: 
     at n (2 n_b (2 n² + l n)); each order, per thread, 6 n_b n² + 4 l n_b n + 4 a n; the result
     ~ sum_n n ((2 + 2l)² + 6l + 12) (n/2 poles per order, held once). The peak is the largest of
     these phases, plus the lag sums (n_b + threads)(p + q + 1) d (d + 1), d = l + m ((r + 1) for
-    d + 1 output-only). ``n_samples`` 0: from covariances
+    d + 1 output-only). With ``bootstrap_draws`` (docs/uq-math.md §5.6) T_H (ab n_b) stays through the
+    orders, and each thread holds a perturbed H and its SVD (ab + svd); B SVDs and B eigenvalue
+    problems per order are added to the time. ``n_samples`` 0: from covariances
     (streaming), no covariance pass. Measured peaks are 0.5 to 1 times it (tests/python/
     test_faults_resources.py).
     """
@@ -248,6 +251,10 @@ def estimate_cost(n_samples: int, n_outputs: int, n_inputs: int, *, block_rows: 
         "noise floor": E + a * b * nb + a * b + realization + (a + b) * s + _NOISE_FLOOR_DRAWS * a * b + block_q,
         "orders": E + a * b + realization + (a + b) * s + block_q + per_order,
     }
+    boot = int(bootstrap_draws) if nb else 0
+    if boot:
+        phases["orders"] += a * b * nb
+        phases["bootstrap"] = E + a * b * nb + a * b + realization + t * (a * b + svd + realization) + result
     if not nb:
         phases["noise floor"] = 0
     # Eigen's SVD and the allocator's slack: 1.3 x, from measured peaks (docs/settings.md)
@@ -260,7 +267,8 @@ def estimate_cost(n_samples: int, n_outputs: int, n_inputs: int, *, block_rows: 
     flops = (2.0 * n_samples * (p + q) * d * d + 10.0 * a * b * s
              + (nb * (2.0 * E + 4.0 * a * b * n) + _NOISE_FLOOR_DRAWS * (2.0 * a * b * nb + 0.5 * a * b * s)
                 if nb else 0.0)
-             + sum(30.0 * min(o, n) ** 3 + 8.0 * nb * min(o, n) ** 2 * (n + l) for o in order_list))
+             + sum(30.0 * min(o, n) ** 3 + 8.0 * nb * min(o, n) ** 2 * (n + l) for o in order_list)
+             + boot * (10.0 * a * b * s + a * b * nb + sum(10.0 * min(o, n) ** 3 for o in order_list)))
     return Cost(bytes=int(peak), seconds=flops / 2e9, parts=parts, a=a, b=b)
 
 
@@ -318,7 +326,8 @@ def check_cost(n_samples: int, n_outputs: int, n_inputs: int, settings, *, n_ref
     cost = estimate_cost(n_samples, n_outputs, n_inputs, block_rows=s.block_rows, past_block_rows=s.past_block_rows,
                          n_references=n_references if n_references is not None else
                          (len(s.references) if s.references else None),
-                         orders=s.orders, n_blocks=s.n_blocks, uncertainty=s.uncertainty, threads=s.threads)
+                         orders=s.orders, n_blocks=s.n_blocks, uncertainty=s.uncertainty, threads=s.threads,
+                         bootstrap_draws=s.bootstrap_draws)
     have, source = available_memory()
     if cost.bytes > have:
         raise ValueError(f"these settings would need about {_gb(cost.bytes)} of memory ({describe_cost(s, cost)}) "

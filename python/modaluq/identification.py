@@ -112,6 +112,15 @@ def identify(y, u=None, *, fs: float, settings: Settings | None = None,
         carries most of the excitation, the uncorrected σ grows with ``n_blocks``; corrected,
         it does not (docs/validation.md, "Issue 27"). One record only (``identify_setups``
         refuses it).
+    bootstrap_draws : int
+        Above the noise floor k* (``Result.significant_singular_values``) the first-order σ of a
+        physical pole is too small (the noise directions in the model are chosen by the noise,
+        which no linearisation follows). With ``bootstrap_draws`` = B (0 = off, the default, or
+        >= 10; 100 is what was validated), σ_f and σ_ξ of every pole above k* that is not
+        noise-coupled are the robust spread (1.4826 MAD) of the pole over B identifications of H
+        perturbed by its own estimation error (docs/uq-math.md §5.6), flagged per mode in
+        ``Modes.bootstrapped``; orders up to k* are unchanged. Each draw costs an SVD of H and
+        the eigenvalues of the orders above k*. One record only (``identify_setups`` refuses it).
 
     frequency_range : (float, float), optional
         Band of interest (f_low, f_high) in Hz. The record is decimated (anti-aliased) to a

@@ -103,6 +103,8 @@ class Modes:
     noise_coupled: np.ndarray | None = None      #: (n_modes,) no first-order sigma: unfrozen (large) sigma kept
     #: (n_modes,) variance factor c of the block-correlation correction (docs/uq-math.md §3.1); 1 when off
     block_correlation_scale: np.ndarray | None = None
+    #: (n_modes,) σ_f and σ_ξ are the bootstrap's (``bootstrap_draws``, docs/uq-math.md §5.6), not first-order
+    bootstrapped: np.ndarray | None = None
     degenerate: bool = False                     #: no modes: above the numerical rank of H, or A not decomposable
     note: str = ""                               #: why the order is degenerate
 
@@ -143,6 +145,7 @@ class Modes:
             noise_coupling=m.noise_coupling if has_std else None,
             noise_coupled=m.noise_coupled if has_std else None,
             block_correlation_scale=m.block_correlation_scale if has_std else None,
+            bootstrapped=m.bootstrapped if has_std else None,
             degenerate=bool(m.degenerate),
             note=str(m.note),
         )

@@ -181,6 +181,8 @@ class Settings:
     noise_coupling_limit: float = _IDENTIFY["noise_coupling_limit"]  #: σ shrink factor that flags a noise-coupled pole
     #: scale each mode's σ for the correlation of adjacent blocks (docs/uq-math.md §3.1)
     block_correlation_correction: bool = _IDENTIFY["block_correlation_correction"]
+    #: draws of the bootstrap of σ_f, σ_ξ above the noise floor (docs/uq-math.md §5.6); 0: off
+    bootstrap_draws: int = _IDENTIFY["bootstrap_draws"]
     # preprocessing (preprocess.py), which the core does not know
     frequency_range: Optional[Tuple[float, float]] = None  #: band of interest (f_low, f_high), Hz
     start: Optional[float] = None                    #: window start, s from the first sample
@@ -208,6 +210,10 @@ class Settings:
         put("input_rcond", check_real("input_rcond", self.input_rcond, low=0, high=1, high_open=True))
         put("threads", check_integer("threads", self.threads, minimum=1, maximum=MAX_THREADS))
         put("noise_coupling_limit", check_real("noise_coupling_limit", self.noise_coupling_limit, low=1))
+        put("bootstrap_draws", check_integer("bootstrap_draws", self.bootstrap_draws, minimum=0))
+        if 0 < self.bootstrap_draws < _core.IdentifyOptions.min_bootstrap_draws:
+            raise ValueError(f"bootstrap_draws must be 0 (off) or >= {_core.IdentifyOptions.min_bootstrap_draws}, "
+                             f"got {self.bootstrap_draws}")
         if isinstance(self.frequency_range, list):  # checked against fs by preprocess()
             put("frequency_range", tuple(self.frequency_range))
 

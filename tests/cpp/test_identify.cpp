@@ -298,4 +298,111 @@ TEST_CASE("the block-correlation correction scales each mode by sqrt(c) from its
     CHECK(scaled > 0);  // the gate let the correction act on some poles of this record
 }
 
+
+TEST_CASE("the bootstrap of sigma above the noise floor follows its definition (docs/uq-math.md §5.6)") {
+    // 1.4826 MAD by hand: odd and even counts
+    std::vector<double> x{1, 2, 3, 4, 100};
+    CHECK(modaluq::detail::mad_std(x) == doctest::Approx(1.482602218505602));  // median 3, deviations' median 1
+    x = {1, 2, 3, 4};
+    CHECK(modaluq::detail::mad_std(x) == doctest::Approx(1.482602218505602));  // 2.5; (0.5 + 1.5) / 2
+
+    // A 3-DOF chain (true order 6) identified up to order 12: orders above k* are bootstrapped.
+    const Sim s = simulate(3, {0, 1, 2}, 12000, 5, false, 1.0, 0.05);
+    auto o = options(s.fs, 5, 5, {4, 6, 8, 10, 12}, true, 20);
+    const auto plain = modaluq::identify(s.y, MatrixXd(), o);
+    o.bootstrap_draws = 40;
+    const auto boot = modaluq::identify(s.y, MatrixXd(), o);
+    const Index ks = boot.significant_singular_values;
+    REQUIRE(ks == plain.significant_singular_values);
+    REQUIRE(ks < 12);
+
+    // The definition again, from the public API only: draw d perturbs R1 (output-only: H = R1, T_H = T_R)
+    // by unvec(T_R eps_d) with the documented Rademacher stream, identifies it without uncertainty,
+    // and each pole follows the nearest pole of its order in |df|/f + |dxi|, within 5 % in f.
+    const auto cov = modaluq::compute_covariances(s.y, MatrixXd(), o.layout(3, 0), 20, true);
+    const MatrixXd t_r = cov.covariance_factor();
+    const MatrixXd eps = modaluq::detail::bootstrap_signs(t_r.cols(), 40);
+    std::vector<Index> above;
+    for (Index n : o.orders)
+        if (n > ks) above.push_back(n);
+    auto od = options(s.fs, 5, 5, above, false);
+    std::vector<modaluq::Identification> draws;
+    for (Index d = 0; d < 40; ++d) {
+        modaluq::Covariances c = cov;
+        c.blocks.resize(0, 0);
+        const VectorXd dr = t_r * eps.col(d);
+        c.R1 += Eigen::Map<const MatrixXd>(dr.data(), c.R1.rows(), c.R1.cols());
+        draws.push_back(modaluq::identify(c, od));
+    }
+    auto mad = [](std::vector<double> v) {
+        auto med = [](std::vector<double> w) {
+            std::sort(w.begin(), w.end());
+            const std::size_t m = w.size() / 2;
+            return w.size() % 2 ? w[m] : 0.5 * (w[m - 1] + w[m]);
+        };
+        const double c = med(v);
+        for (double& e : v) e = std::abs(e - c);
+        return 1.482602218505602 * med(v);
+    };
+    Index n_boot = 0;
+    for (std::size_t k = 0; k < boot.modes.size(); ++k) {
+        const auto &a = plain.modes[k], &b = boot.modes[k];
+        REQUIRE(a.n_modes() == b.n_modes());
+        CHECK(b.frequency_hz == a.frequency_hz);
+        CHECK(b.mode_shape_std_real == a.mode_shape_std_real);  // the shapes stay first-order
+        if (b.order <= ks) {  // untouched, bit for bit
+            CHECK(!b.bootstrapped.any());
+            CHECK(b.frequency_std == a.frequency_std);
+            CHECK(b.covariance == a.covariance);
+            continue;
+        }
+        for (Index i = 0; i < b.n_modes(); ++i) {
+            std::vector<double> fs_, xs_;
+            for (const auto& id : draws) {
+                const auto& m = id.at_order(b.order);
+                Index best = -1;
+                double dbest = 1e300;
+                for (Index j = 0; j < m.n_modes(); ++j) {
+                    const double dist = std::abs(m.frequency_hz(j) / b.frequency_hz(i) - 1) +
+                                        std::abs(m.damping_ratio(j) - b.damping_ratio(i));
+                    if (dist < dbest) dbest = dist, best = j;
+                }
+                if (best >= 0 && std::abs(m.frequency_hz(best) / b.frequency_hz(i) - 1) <= 0.05) {
+                    fs_.push_back(m.frequency_hz(best));
+                    xs_.push_back(m.damping_ratio(best));
+                }
+            }
+            const bool expect = !a.noise_coupled(i) && fs_.size() >= 32;  // 80 % of 40
+            CHECK(b.bootstrapped(i) == expect);
+            if (!expect) {
+                CHECK(b.frequency_std(i) == a.frequency_std(i));
+                CHECK(b.damping_std(i) == a.damping_std(i));
+                continue;
+            }
+            ++n_boot;
+            const double sf = mad(fs_), sx = mad(xs_);
+            CHECK(b.frequency_std(i) == doctest::Approx(sf).epsilon(1e-9));
+            CHECK(b.damping_std(i) == doctest::Approx(sx).epsilon(1e-9));
+            // covariance: f and xi rows/columns rescaled, correlation and shape block kept
+            const Index np = 8;
+            Eigen::Map<const MatrixXd> ca(a.covariance.col(i).data(), np, np), cb(b.covariance.col(i).data(), np, np);
+            CHECK(cb(0, 0) == doctest::Approx(sf * sf).epsilon(1e-12));
+            CHECK(cb(1, 1) == doctest::Approx(sx * sx).epsilon(1e-12));
+            CHECK(b.frequency_damping_correlation(i) == a.frequency_damping_correlation(i));
+            CHECK(cb(0, 1) / std::sqrt(cb(0, 0) * cb(1, 1)) ==
+                  doctest::Approx(ca(0, 1) / std::sqrt(ca(0, 0) * ca(1, 1))).epsilon(1e-12));
+            CHECK(cb.bottomRightCorner(6, 6) == ca.bottomRightCorner(6, 6));
+            CHECK(factor_rows_covariance_error(b, i) < 1e-10);  // the factor rows still give [f, xi]
+        }
+    }
+    CHECK(n_boot > 0);
+
+    o.threads = 2;  // the draws on two threads: the same
+    const auto two = modaluq::identify(s.y, MatrixXd(), o);
+    for (std::size_t k = 0; k < boot.modes.size(); ++k) CHECK(two.modes[k].frequency_std == boot.modes[k].frequency_std);
+
+    o.bootstrap_draws = 5;
+    CHECK_THROWS_AS(modaluq::identify(s.y, MatrixXd(), o), modaluq::invalid_argument);
+}
+
 }  // namespace test_identify

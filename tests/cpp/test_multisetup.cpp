@@ -275,12 +275,16 @@ TEST_CASE("campaigns that cannot be merged are refused with the reason") {
     }
 }
 
-TEST_CASE("a campaign refuses the block-correlation correction (one record's blocks only)") {
+TEST_CASE("a campaign refuses the block-correlation correction and the bootstrap (one record's blocks only)") {
     Campaign c = make_campaign(false);
     c.options.block_correlation_correction = true;
     CHECK_THROWS_WITH_AS(modaluq::identify_setups(c.setups, c.options),
                          doctest::Contains("block_correlation_correction applies to one record"),
                          modaluq::invalid_argument);
+    c.options.block_correlation_correction = false;
+    c.options.bootstrap_draws = 20;  // the bootstrap of sigma (docs/uq-math.md §5.6) is one record's too
+    CHECK_THROWS_WITH_AS(modaluq::identify_setups(c.setups, c.options),
+                         doctest::Contains("bootstrap_draws applies to one record"), modaluq::invalid_argument);
 }
 
 }  // namespace test_multisetup

@@ -344,10 +344,11 @@ NOISE_FLOOR_SEED = 0x6D6F64616C7571        # "modaluq"
 _M64 = (1 << 64) - 1
 
 
-def rademacher_signs(n_blocks, draws=NOISE_FLOOR_DRAWS):
+def rademacher_signs(n_blocks, draws=NOISE_FLOOR_DRAWS, seed=NOISE_FLOOR_SEED):
     """(n_blocks x draws) signs from SplitMix64 (Steele, Lea & Flood 2014) seeded with
-    NOISE_FLOOR_SEED: entry (b, t) is draw t*n_blocks + b, +1 when its top bit is clear (§5.5)."""
-    state = NOISE_FLOOR_SEED
+    ``seed`` (NOISE_FLOOR_SEED for §5.5, BOOTSTRAP_SEED for §5.6): entry (b, t) is draw
+    t*n_blocks + b, +1 when its top bit is clear."""
+    state = seed
     eps = np.empty((n_blocks, draws))
     for t in range(draws):
         for b in range(n_blocks):
@@ -386,6 +387,55 @@ def noise_floor(H, T_H, k_max, factor=1.5):
                       for k in range(k_max)])
     below = np.flatnonzero(s[:k_max] < factor * delta)
     return (int(below[0]) if below.size else k_max), delta
+
+
+# --------------------------------------------------------------------------------------
+# §5.6: the bootstrap of sigma_f, sigma_xi above the noise floor
+# --------------------------------------------------------------------------------------
+BOOTSTRAP_SEED = 0x626F6F7473747270        # "bootstrp"
+BOOTSTRAP_TOLERANCE = 0.05
+BOOTSTRAP_MIN_FOLLOWED = 0.8
+
+
+def bootstrap_std(H, T_H, l, fs, targets, draws):
+    """§5.6 by its definition: draw d is H + unvec(T_H eps_d) with eps = rademacher_signs(n_b,
+    draws, BOOTSTRAP_SEED); each order of ``targets`` ({order: (f, xi)} of the record's poles) is
+    identified from the draw's SVD (scipy eigenvalues, Im > 0), each pole follows the draw's pole
+    nearest in |df|/f + |dxi| when within BOOTSTRAP_TOLERANCE in f, and its sigma is 1.4826 times
+    the median absolute deviation from the median of the followed values (NaN when fewer than
+    ceil(0.8 draws) followed).  Returns {order: (sd_f, sd_xi)}."""
+    H = np.asarray(H, dtype=np.float64)
+    a, b = H.shape
+    eps = rademacher_signs(T_H.shape[1], draws, BOOTSTRAP_SEED)
+    n_max = max(targets)
+    samples = {n: np.full((len(f), draws, 2), np.nan) for n, (f, _) in targets.items()}
+    for d in range(draws):
+        Hb = H + unvec(T_H @ eps[:, d], a, b)
+        U, s, _ = svd_sorted(Hb)
+        for n, (f0, x0) in targets.items():
+            if n > n_max or len(f0) == 0:
+                continue
+            A, _ = system_matrices(U[:, :n] * np.sqrt(s[:n]), l)
+            w = scipy.linalg.eigvals(A)
+            w = w[w.imag > 0]
+            if w.size == 0:
+                continue
+            mu = np.log(w) * fs
+            f, xi = np.abs(mu) / (2 * np.pi), -mu.real / np.abs(mu)
+            dist = np.abs(f[None, :] / np.asarray(f0)[:, None] - 1) + np.abs(xi[None, :] - np.asarray(x0)[:, None])
+            j = np.argmin(dist, axis=1)
+            ok = np.abs(f[j] / f0 - 1) <= BOOTSTRAP_TOLERANCE
+            samples[n][ok, d, 0], samples[n][ok, d, 1] = f[j][ok], xi[j][ok]
+    need = max(int(np.ceil(BOOTSTRAP_MIN_FOLLOWED * draws)), 2)
+    out = {}
+    for n, smp in samples.items():
+        sd = np.full((smp.shape[0], 2), np.nan)
+        for i in range(smp.shape[0]):
+            v = smp[i][np.isfinite(smp[i, :, 0])]
+            if len(v) >= need:
+                sd[i] = 1.482602218505602 * np.median(np.abs(v - np.median(v, axis=0)), axis=0)
+        out[n] = (sd[:, 0], sd[:, 1])
+    return out
 
 
 # --------------------------------------------------------------------------------------
@@ -527,7 +577,7 @@ def _orders_list(orders):
 
 
 def _identify(y, u, fs, p, q, orders, n_blocks, references, uncertainty, demean, path,
-              freeze_noise=True, noise_coupling_limit=20.0):
+              freeze_noise=True, noise_coupling_limit=20.0, bootstrap_draws=0):
     q = p if q is None else int(q)
     p = int(p)
     orders = _orders_list(orders)
@@ -612,13 +662,39 @@ def _identify(y, u, fs, p, q, orders, n_blocks, references, uncertainty, demean,
             res["mode_shape_std_imag"] = std[:, 2 + l:].T.copy()
             res["covariance"] = covm
             res["significant_singular_values"] = k_star
+            res["bootstrapped"] = np.zeros(nm, bool)
         result[n] = res
+    if uncertainty and bootstrap_draws:
+        _apply_bootstrap(result, H, J_HR @ T_R, l, fs, k_star, bootstrap_draws)
     return result
+
+
+def _apply_bootstrap(result, H, T_H, l, fs, k_star, draws):
+    """§5.6: sigma_f, sigma_xi of the poles above k* (not noise-coupled, followed) from
+    :func:`bootstrap_std`; the covariance's f and xi rows and columns (and the factor's rows)
+    scaled by sigma_boot / sigma_first_order."""
+    targets = {n: (r["frequency_hz"], r["damping_ratio"]) for n, r in result.items()
+               if n > k_star and len(r["frequency_hz"])}
+    if not targets:
+        return
+    for n, (sf, sx) in bootstrap_std(H, T_H, l, fs, targets, draws).items():
+        r = result[n]
+        for i in range(len(sf)):
+            if (r["noise_coupled"][i] or not (sf[i] > 0) or not (sx[i] > 0)
+                    or not (r["frequency_std"][i] > 0) or not (r["damping_std"][i] > 0)):
+                continue
+            c = np.ones(2 + 2 * l)
+            c[0], c[1] = sf[i] / r["frequency_std"][i], sx[i] / r["damping_std"][i]
+            r["covariance"][i] = r["covariance"][i] * np.outer(c, c)
+            if "factor" in r:
+                r["factor"][i] = r["factor"][i] * c[:, None]
+            r["frequency_std"][i], r["damping_std"][i] = sf[i], sx[i]
+            r["bootstrapped"][i] = True
 
 
 def identify(y, u=None, *, fs, block_rows, past_block_rows=None, orders, n_blocks=50,
              references=None, uncertainty=True, demean=True, freeze_noise=True,
-             noise_coupling_limit=20.0):
+             noise_coupling_limit=20.0, bootstrap_draws=0):
     """SSI-cov identification with the **full explicit** delta-method path (§8).
 
     Sigma_R = T_R T_R^T; Sigma_H = J_{H,R} Sigma_R J_{H,R}^T; Sigma_Gamma =
@@ -628,6 +704,8 @@ def identify(y, u=None, *, fs, block_rows, past_block_rows=None, orders, n_block
 
     The noise floor k* and the frozen propagation of §5.5 apply as in the core
     (``freeze_noise``, ``noise_coupling_limit``); each order's "significant_singular_values" is k*.
+    ``bootstrap_draws`` > 0: sigma_f, sigma_xi above k* from the bootstrap of §5.6
+    (:func:`bootstrap_std`), each order's "bootstrapped" saying which.
 
     Returns {order: dict} with frequency_hz, damping_ratio, mode_shape (l x nm complex),
     eigenvalues, ref_index and, when ``uncertainty``, frequency_std, damping_std,
@@ -635,15 +713,15 @@ def identify(y, u=None, *, fs, block_rows, past_block_rows=None, orders, n_block
     Raises ValueError for an order outside [1, min((p-1) l, q r)].
     """
     return _identify(y, u, fs, block_rows, past_block_rows, orders, n_blocks, references,
-                     uncertainty, demean, "explicit", freeze_noise, noise_coupling_limit)
+                     uncertainty, demean, "explicit", freeze_noise, noise_coupling_limit, bootstrap_draws)
 
 
 def identify_factor(y, u=None, *, fs, block_rows, past_block_rows=None, orders, n_blocks=50,
                     references=None, uncertainty=True, demean=True, freeze_noise=True,
-                    noise_coupling_limit=20.0):
+                    noise_coupling_limit=20.0, bootstrap_draws=0):
     """Same as :func:`identify` but with the factor formulation (§8): U_theta =
     J_theta J_{AC,Gamma} J_{Gamma,H} J_{H,R} T_R, Sigma_theta = U_theta U_theta^T (std =
     row norms).  Each order's dict also has 'factor' (nm x d x n_blocks).  A second check
     of :func:`identify`; same explicit Jacobians, no Sigma_H formed."""
     return _identify(y, u, fs, block_rows, past_block_rows, orders, n_blocks, references,
-                     uncertainty, demean, "factor", freeze_noise, noise_coupling_limit)
+                     uncertainty, demean, "factor", freeze_noise, noise_coupling_limit, bootstrap_draws)

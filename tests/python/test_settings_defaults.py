@@ -96,13 +96,14 @@ def test_to_dict_and_record_are_unchanged():
     assert Settings(frequency_range=[1, 2], references=(0, 2)).to_dict() == {
         "block_rows": None, "past_block_rows": None, "orders": None, "n_blocks": None, "references": [0, 2],
         "uncertainty": True, "demean": True, "input_rcond": 1e-10, "threads": 1, "freeze_noise": True,
-        "noise_coupling_limit": 20.0, "block_correlation_correction": False, "frequency_range": [1, 2], "start": None, "stop": None, "decimate": None,
+        "noise_coupling_limit": 20.0, "block_correlation_correction": False, "bootstrap_draws": 0, "frequency_range": [1, 2], "start": None, "stop": None, "decimate": None,
         "detrend": None, "highpass": None}
     record = Settings(block_rows=10, orders=(2, 4), n_blocks=20, uncertainty=False).record(50.0, 3)
     assert list(record.items()) == [
         ("fs", 50.0), ("block_rows", 10), ("past_block_rows", 10), ("orders", [2, 4]), ("n_blocks", None),
         ("references", [0, 1, 2]), ("uncertainty", False), ("demean", True), ("input_rcond", 1e-10),
-        ("threads", 1), ("freeze_noise", True), ("noise_coupling_limit", 20.0), ("block_correlation_correction", False)]
+        ("threads", 1), ("freeze_noise", True), ("noise_coupling_limit", 20.0), ("block_correlation_correction", False),
+        ("bootstrap_draws", 0)]
 
 
 # --------------------------------------------------------------------------- the command line
@@ -136,6 +137,7 @@ def test_cli_without_options_gives_the_library_defaults():
     ("--no-uncertainty", None, 0, "uncertainty", False),
     ("--n-blocks", "20", 0, "n_blocks", 20),
     ("--highpass", "0.5", 0, "highpass", 0.5),
+    ("--bootstrap-draws", "100", 0, "bootstrap_draws", 100),
 ])
 def test_cli_options_given_set_their_field_and_nothing_else(option, text, owner, field, value):
     args = _parse(option, *([text] if text else []))
@@ -152,6 +154,8 @@ def test_cli_errors_still_name_the_option(capsys):
 
     assert main(["identify", "nowhere.csv", "--min-mac", "1.5"]) == 2
     assert "--min-mac must be <= 1" in capsys.readouterr().err
+    assert main(["identify", "nowhere.csv", "--bootstrap-draws", "5"]) == 2
+    assert "--bootstrap-draws must be 0 (off) or >= 10, got 5" in capsys.readouterr().err
 
 
 def test_cli_help_shows_the_library_defaults():

@@ -47,7 +47,8 @@ def test_every_study_is_smoke_tested():
                                            "warnings_issue27.py", "warnings_issue27_premise.py",
                                            "io_block_bias.py", "poser_mc.py", "pyoma2_multisetup.py",
                                            "split_halves_pool.py", "block_scaling_mc.py",
-                                           "above_order_diagnosis.py", "partial_unfreeze_mc.py"}
+                                           "above_order_diagnosis.py", "partial_unfreeze_mc.py",
+                                           "bootstrap_sigma_mc.py"}
     assert scripts == tested
 
 
@@ -70,7 +71,7 @@ def test_warnings_issue27_premise(capsys):
 
 @pytest.mark.slow
 def test_selected_sigma_mc(capsys):
-    out = _module("selected_sigma_mc").main(n_records=2, duration=40.0)
+    out = _module("selected_sigma_mc").main(n_records=2, duration=40.0, bootstrap_draws=10)
     assert set(out) == {"input/output", "output-only"}
     assert out["output-only"].shape == (2, 6, 4)
     assert "| mode | f (Hz) | found |" in capsys.readouterr().out
@@ -146,6 +147,26 @@ def test_partial_unfreeze_mc(capsys, tmp_path):
     ok = np.isfinite(a[:, 0]) & (out["k_star"][:, :, None, None] >= 8)
     assert np.allclose(a[:, 0][ok], b[:, 0][ok], rtol=1e-12)
     assert "| method | order | mode | n | κ=0 |" in capsys.readouterr().out
+
+
+def test_bootstrap_sigma_mc(capsys, tmp_path):
+    study = _module("bootstrap_sigma_mc")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # statistics of 2 records
+        out = study.main(n_records=2, structure="frame", draws=12, out=tmp_path / "bs.npz", progress=False)
+    assert out["s_boot"].shape == (2, 3, 2, 4, 2, 2) and out["k_star"].shape == (2, 2)
+    assert "| hybrid |" in capsys.readouterr().out
+    # with a vanishing perturbation the bootstrap is the plain first-order map on the same draws:
+    # the std over the draws of j_plain T_H ε_b (output-only: H = R1, so T_H = T_R)
+    from modaluq.simulate import simulate
+    sim = simulate(study.N_SAMPLES, seed=5, n_dof=4, input_dofs=(0, 3))
+    draws, seed = 40, 3
+    bs = study.bootstrap(sim.y, None, sim.fs, (8,), draws=draws, scales=(1e-6,), seed=seed)[8]
+    rec = study.record_maps(sim.y, None, sim.fs, (8,))
+    eps = np.random.default_rng(seed).standard_normal((rec["T_H"].shape[1], draws))
+    lin = np.std(rec[8]["plain"] @ rec["T_H"] @ eps, axis=-1, ddof=1)             # modes × 2
+    assert np.allclose(bs["f"], rec[8]["f"], rtol=1e-12)
+    assert np.allclose(bs["boot"][0], lin, rtol=1e-3)
 
 
 def test_poser_mc(capsys):

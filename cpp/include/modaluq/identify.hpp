@@ -15,6 +15,7 @@
 #include <vector>
 
 #include "covariance.hpp"
+#include "detail/bootstrap.hpp"
 #include "detail/parallel.hpp"
 #include "modal.hpp"
 #include "realization.hpp"
@@ -51,6 +52,12 @@ struct IdentifyOptions {
     /// measured input carrying the excitation, and changes nothing measurable elsewhere
     /// (docs/validation.md, "Issue 27", (d)).
     bool block_correlation_correction = false;
+    /// Draws B of the bootstrap of sigma_f and sigma_xi above the noise floor k* (docs/uq-math.md
+    /// §5.6): at every order above k*, each pole not noise_coupled gets the robust spread of its
+    /// frequency and damping over B identifications of H perturbed by its own estimation error
+    /// (Modes::bootstrapped). 0 turns it off (the first-order sigma everywhere); orders up to k*
+    /// are never touched. Each draw costs an SVD of H and the eigenvalues of every order above k*.
+    Index bootstrap_draws = 0;
 
     void validate() const {
         detail::require(std::isfinite(fs) && fs > 0.0, "fs must be a finite sampling frequency > 0 Hz, got ", fs);
@@ -63,10 +70,14 @@ struct IdentifyOptions {
         detail::require(std::isfinite(noise_floor_factor) && noise_floor_factor > 0.0,
                         "noise_floor_factor must be finite and > 0, got ", noise_floor_factor);
         detail::require(noise_coupling_limit >= 1.0, "noise_coupling_limit must be >= 1, got ", noise_coupling_limit);
+        detail::require(bootstrap_draws >= 0, "bootstrap_draws must be >= 0, got ", bootstrap_draws);
+        detail::require(bootstrap_draws == 0 || bootstrap_draws >= kMinBootstrapDraws,
+                        "bootstrap_draws must be 0 (off) or >= ", kMinBootstrapDraws, ", got ", bootstrap_draws);
         detail::require(threads >= 1, "threads must be >= 1, got ", threads);
         detail::require(threads <= kMaxThreads, "threads must be <= ", kMaxThreads, ", got ", threads);
     }
     static constexpr Index kMaxThreads = 1024;  ///< more is a mistake, not a machine
+    static constexpr Index kMinBootstrapDraws = 10;  ///< fewer leave the spread of a pole to chance
 
     HankelLayout layout(Index n_outputs, Index n_inputs) const {
         HankelLayout L;
@@ -206,6 +217,7 @@ inline Modes degenerate_modes(Index order, Index n_outputs, bool with_uncertaint
         m.noise_coupling.resize(0);
         m.noise_coupled.resize(0);
         m.block_correlation_scale.resize(0);
+        m.bootstrapped.resize(0);
     }
     return m;
 }
@@ -253,6 +265,7 @@ inline Identification identify_with_factor(const Covariances& cov, Eigen::Matrix
                     ": the record holds no oscillation to identify (is y constant, a step or an impulse?)");
 
     std::unique_ptr<UncertaintyPropagator> prop;
+    Eigen::MatrixXd t_h;
     double block_seconds = 0.0;
     if (options.uncertainty) {
         out.n_blocks = t_r.cols();
@@ -264,14 +277,15 @@ inline Identification identify_with_factor(const Covariances& cov, Eigen::Matrix
                 "n_blocks = ", out.n_blocks, " is too few for the joint covariance of the ", 2 + 2 * L.n_outputs,
                 " parameters of a mode: use n_blocks >= ", 3 + 2 * L.n_outputs,
                 " (the standard deviations of f and xi alone are still estimated, but from few blocks)"));
-        // T_H lives only while the propagator takes what it needs from it.
+        // T_H lives only while the propagator takes what it needs from it (and the bootstrap).
         NoiseOptions noise;
         noise.freeze = options.freeze_noise;
         noise.floor_factor = options.noise_floor_factor;
         noise.coupling_limit = options.noise_coupling_limit;
-        prop = std::make_unique<UncertaintyPropagator>(re, propagate_to_subspace(sub, cov, std::move(t_r)),
-                                                       L.rows_past(), options.threads, noise,
+        t_h = propagate_to_subspace(sub, cov, std::move(t_r));
+        prop = std::make_unique<UncertaintyPropagator>(re, t_h, L.rows_past(), options.threads, noise,
                                                        options.block_correlation_correction);
+        if (options.bootstrap_draws == 0) t_h.resize(0, 0);  // only the bootstrap needs it again
         out.significant_singular_values = prop->significant_singular_values();
         out.signal_to_noise = re.singular_values()(0) / prop->singular_value_std(0);
         // A statistic of the blocks, so a warning, not a refusal: a short record with real
@@ -305,6 +319,9 @@ inline Identification identify_with_factor(const Covariances& cov, Eigen::Matrix
         }
         out.modes[k] = std::move(m);
     });
+    if (prop && options.bootstrap_draws > 0)
+        apply_bootstrap(out.modes, sub.H, t_h, L.n_outputs, options.fs, out.significant_singular_values,
+                        options.bootstrap_draws, options.threads);
     const std::string degenerate = degenerate_order_list(out.modes);
     if (!degenerate.empty())
         out.warn(IdentificationWarning::degenerate_orders, detail::concat(

@@ -67,6 +67,12 @@ struct Modes {
     /// IdentifyOptions::block_correlation_correction): its factor, covariance and std are sqrt(c)
     /// and c times the uncorrected ones; 1 when the correction is off.
     Eigen::VectorXd block_correlation_scale;
+    /// Per mode: its sigma_f and sigma_xi are the bootstrap's (IdentifyOptions::bootstrap_draws,
+    /// docs/uq-math.md §5.6), not the first-order ones: an order above the noise floor k*, a pole
+    /// not noise_coupled and followed in enough draws. Its covariance's f and xi rows and columns
+    /// and its frequency_damping_factor rows are rescaled to them (correlations kept); the shape
+    /// entries stay first-order.
+    Eigen::Array<bool, Eigen::Dynamic, 1> bootstrapped;
     /// No modes at this order: it is above the numerical rank of H, or (A, C) has no usable
     /// eigen-decomposition there (`note` says which). The other orders are unaffected.
     bool degenerate = false;

@@ -188,6 +188,8 @@ inline SetupsIdentification identify_setups(const std::vector<SetupData>& setups
     detail::require(!setups.empty(), "setups must hold at least one setup");
     detail::require(!options.block_correlation_correction,
                     "block_correlation_correction applies to one record (identify), not to a campaign's merge");
+    detail::require(options.bootstrap_draws == 0,
+                    "bootstrap_draws applies to one record (identify), not yet to a campaign's merge");
     std::sort(options.orders.begin(), options.orders.end());
     options.orders.erase(std::unique(options.orders.begin(), options.orders.end()), options.orders.end());
     const Index ns = static_cast<Index>(setups.size());

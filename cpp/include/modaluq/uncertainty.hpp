@@ -47,6 +47,7 @@ inline void resize_mode_uncertainty(Modes& modes, Index l, Index nb) {
     modes.noise_coupling = Eigen::VectorXd::Ones(nm);
     modes.noise_coupled = Eigen::Array<bool, Eigen::Dynamic, 1>::Constant(nm, false);
     modes.block_correlation_scale = Eigen::VectorXd::Ones(nm);
+    modes.bootstrapped = Eigen::Array<bool, Eigen::Dynamic, 1>::Constant(nm, false);
 }
 
 /// The variance factor c of the block-correlation correction (docs/uq-math.md §3.1) of one mode

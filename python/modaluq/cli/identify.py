@@ -293,7 +293,8 @@ def _print_run(analysis, source, written, t_start) -> None:
 NOT_WITH_SETUPS = (("outputs", "--outputs", "a campaign's outputs are every channel of its setups but the inputs"),
                    ("format", "--format", "give a setup's format in its [[setup]] entry"),
                    ("read_option", "--read-option", "give a setup's reader options in its [[setup]] entry"),
-                   ("check_horizons", "--check-horizons", "the horizon check is for one record"))
+                   ("check_horizons", "--check-horizons", "the horizon check is for one record"),
+                   ("bootstrap_draws", "--bootstrap-draws", "the bootstrap of sigma is for one record"))
 
 
 def run_setups(args, t_start: float) -> int:

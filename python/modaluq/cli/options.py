@@ -20,7 +20,7 @@ __all__ = ["CLUSTERING_OPTIONS", "CRITERIA_OPTIONS", "OFF_AT_ZERO", "SETTINGS_OP
 #: Options that set the field of the same name, by the object that holds it (``--no-uncertainty``
 #: sets ``Settings.uncertainty``).
 SETTINGS_OPTIONS = ("frequency_range", "start", "stop", "decimate", "detrend", "highpass", "block_rows",
-                    "past_block_rows", "n_blocks")
+                    "past_block_rows", "n_blocks", "bootstrap_draws")
 CRITERIA_OPTIONS = ("max_frequency_change", "max_damping_change", "min_mac", "damping_std_factor", "match_window",
                     "frequency_std_factor", "max_frequency_cov", "max_damping_ratio")
 CLUSTERING_OPTIONS = ("distance_threshold", "min_cluster_size")
@@ -73,6 +73,9 @@ def add_analysis_options(p: argparse.ArgumentParser) -> None:
                         "time of a 1 %%-damped mode at the band's lowest frequency, 10-50; docs/settings.md)")
     g.add_argument("--references", nargs="+", metavar="CH", default=None,
                    help="reference outputs of the past data matrix (default: all outputs)")
+    g.add_argument("--bootstrap-draws", type=integer_option(0), default=None, metavar="B",
+                   help="sigma of f and xi above the noise floor (the diagram's upper orders) from B bootstrap "
+                        "draws, e.g. 100 (default 0: first-order everywhere; docs/uq-math.md §5.6)")
     g.add_argument("--no-uncertainty", action="store_true",
                    help="skip the uncertainty (the sigma criteria are then not applied)")
     g = p.add_argument_group("stabilization and mode selection")

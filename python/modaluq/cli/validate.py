@@ -83,6 +83,8 @@ def run_split_halves(args) -> int:
         given = {k: getattr(args, k) for k in names if getattr(args, k) is not None}
         if args.block_correlation_correction:
             given["block_correlation_correction"] = True
+        if args.bootstrap_draws is not None:
+            given["bootstrap_draws"] = args.bootstrap_draws
         settings = Settings(**given, **({"orders": args.order} if args.order is not None else {}))
         analysis = Analysis.from_file(args.split_halves, fs=args.fs, format=args.format,
                                       read_options=parse_read_options(args.read_option), outputs=args.outputs,
@@ -126,6 +128,8 @@ def run(args) -> int:
         given["freeze_noise"] = False
     if args.block_correlation_correction:
         given["block_correlation_correction"] = True
+    if args.bootstrap_draws is not None:
+        given["bootstrap_draws"] = args.bootstrap_draws
     results = monte_carlo(**{**given, "order": orders}, progress=not args.no_progress)
     text = "\n".join(r.report() for r in results)
     if out is not None:
@@ -191,6 +195,9 @@ def register(subparsers) -> None:
     v.add_argument("--block-correlation-correction", action="store_true",
                    help="correct each mode's sigma for the correlation of adjacent blocks "
                         "(docs/uq-math.md §3.1; identify's block_correlation_correction)")
+    v.add_argument("--bootstrap-draws", type=integer_option(0), default=None,
+                   help="sigma of f and xi above the noise floor from this many bootstrap draws "
+                        "(0 = off, else >= 10; docs/uq-math.md §5.6; identify's bootstrap_draws)")
     v.add_argument("--seed", type=integer_option(0), default=None,
                    help=f"seed of the run; record k uses SeedSequence(seed, spawn_key=(k,)) (default {d['seed']})")
     v.add_argument("--processes", type=integer_option(1, MAX_THREADS), default=None,

@@ -251,7 +251,8 @@ def monte_carlo(n_records: int = 200, *, n_samples: int = 10_000, order=12, bloc
                 mp_context: str = "spawn", unknown_input_std: float = 0.1, damping_ratio: float = 0.02,
                 n_dof: int = 6, input_dofs=(0,), output_dofs=None, freeze_noise: bool = Settings.freeze_noise,
                 noise_coupling_limit: float = Settings.noise_coupling_limit,
-                block_correlation_correction: bool = Settings.block_correlation_correction):
+                block_correlation_correction: bool = Settings.block_correlation_correction,
+                bootstrap_draws: int = Settings.bootstrap_draws):
     """Monte Carlo study of the analytic standard deviations (the paper's §5.1).
 
     Simulates ``n_records`` independent records of the paper's 6-DOF chain
@@ -303,10 +304,11 @@ def monte_carlo(n_records: int = 200, *, n_samples: int = 10_000, order=12, bloc
     n_dof, input_dofs, output_dofs
         The structure (:func:`modaluq.simulate`): the paper's 6-DOF chain by default; e.g.
         ``n_dof=4, input_dofs=(0, 3)`` is a 4-storey shear frame with two known inputs.
-    freeze_noise, noise_coupling_limit, block_correlation_correction
+    freeze_noise, noise_coupling_limit, block_correlation_correction, bootstrap_draws
         Passed to :func:`modaluq.identify` (``freeze_noise=False``: the plain first-order
         propagation, for comparison; ``block_correlation_correction=True``: σ corrected for the
-        correlation of adjacent blocks, docs/uq-math.md §3.1).
+        correlation of adjacent blocks, docs/uq-math.md §3.1; ``bootstrap_draws=100``: σ_f, σ_ξ
+        above the noise floor from the bootstrap, docs/uq-math.md §5.6).
 
     Returns
     -------
@@ -355,7 +357,8 @@ def monte_carlo(n_records: int = 200, *, n_samples: int = 10_000, order=12, bloc
     settings = Settings(block_rows=block_rows, past_block_rows=past_block_rows, orders=orders,
                         n_blocks=check_integer("n_blocks", n_blocks, minimum=2), freeze_noise=freeze_noise,
                         noise_coupling_limit=noise_coupling_limit,
-                        block_correlation_correction=block_correlation_correction)
+                        block_correlation_correction=block_correlation_correction,
+                        bootstrap_draws=bootstrap_draws)
     seed = check_integer("seed", seed, minimum=0)
     processes = _available_cpus() if processes is None else check_integer("processes", processes, minimum=1,
                                                                       maximum=MAX_THREADS)
@@ -429,7 +432,8 @@ def monte_carlo(n_records: int = 200, *, n_samples: int = 10_000, order=12, bloc
                                                          for k, v in simulation.items()},
                                    "paper_case": paper_case, "freeze_noise": settings.freeze_noise,
                                    "noise_coupling_limit": settings.noise_coupling_limit,
-                                   "block_correlation_correction": settings.block_correlation_correction},
+                                   "block_correlation_correction": settings.block_correlation_correction,
+                                   "bootstrap_draws": settings.bootstrap_draws},
                          elapsed_s=elapsed, processes=processes, machine=machine, n_bootstrap=n_bootstrap)
         for n in orders)
     return results[0] if single else results

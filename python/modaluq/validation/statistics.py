@@ -173,6 +173,10 @@ class MonteCarloResult:
     #: when every record's σ is its scatter, even when σ differs from record to record
     frequency_rms_z_unflagged: np.ndarray = field(init=False)
     damping_rms_z_unflagged: np.ndarray = field(init=False)
+    #: (2, n_modes) share of the unflagged records whose |estimate - mean| <= 1.96 × their own σ
+    #: (0.95 when σ is right and the estimates are normal)
+    frequency_coverage_unflagged: np.ndarray = field(init=False)
+    damping_coverage_unflagged: np.ndarray = field(init=False)
 
     def __post_init__(self):
         rng = np.random.default_rng(np.random.SeedSequence([int(self.settings.get("seed", 0)), 1]))
@@ -216,6 +220,9 @@ class MonteCarloResult:
                 ok = np.isfinite(z)
                 rms = np.sqrt(np.where(ok, z * z, 0).sum(axis=1) / ok.sum(axis=1))
             set_(self, f"{name}_rms_z_unflagged", np.where(ok.sum(axis=1) >= 2, rms, np.nan))
+            with np.errstate(invalid="ignore"):
+                cover = np.where(ok, np.abs(z) <= 1.96, False).sum(axis=1) / ok.sum(axis=1)
+            set_(self, f"{name}_coverage_unflagged", np.where(ok.sum(axis=1) >= 2, cover, np.nan))
         if self.mode_shape is not None and self.mode_shape_std_real is not None:
             set_(self, "mode_shape_std_ratio_median", np.stack([
                 _shape_ratio(self.mode_shape[m], self.mode_shape_std_real[m], self.mode_shape_std_imag[m],

@@ -338,3 +338,11 @@ def test_cli_check_horizons_prints_the_spread_and_writes_it_to_json(tmp_path, ca
     check = json.loads(out.read_text())["horizon_check"]
     assert check["block_rows"] == [75, 100, 150]
     assert len(check["modes"]) == 6 and all(len(m["frequency_hz"]) == 3 for m in check["modes"])
+
+
+def test_bootstrap_draws_reaches_the_identification(small_csv):
+    # docs/uq-math.md §5.6: the option is the library's, recorded with the settings
+    out = small_csv.parent / "modes.json"
+    assert main(["identify", str(small_csv), "--out", str(out), "--bootstrap-draws", "10", *FAST_ARGS]) == 0
+    report = json.loads(out.read_text())
+    assert report["stamp"]["settings"]["identification"]["bootstrap_draws"] == 10

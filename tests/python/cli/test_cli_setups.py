@@ -98,6 +98,7 @@ def test_the_campaign_geometry_gives_uff(campaign_file, tmp_path, capsys):
     (["--outputs", "L1"], "--outputs does not apply with --setups"),
     (["--read-option", "time_column=t"], "--read-option does not apply with --setups"),
     (["--check-horizons"], "--check-horizons does not apply with --setups"),
+    (["--bootstrap-draws", "50"], "--bootstrap-draws does not apply with --setups"),
     (["--references", "L3", "L9"], r"setup 0 \('setup1.csv'\) lacks the reference channel\(s\) \['L9'\]"),
     (["--fs", "50"], r"setup 0 \('setup1.csv'\) is sampled at 25 Hz but fs = 50 Hz"),
     (["--orders", "2:80:2"], "above what the merge supports"),

@@ -71,6 +71,12 @@ def test_summary_is_the_statistics_of_the_arrays(mc200):
     assert mc200.frequency_std_ratio[m, i] == pytest.approx(np.mean(sf[ok]) / np.std(f[ok], ddof=1), rel=1e-12)
     # The bootstrap SE of a ratio of two averages over 200 records: a few percent, not 0, not 1.
     assert 0.01 < mc200.frequency_std_ratio_se[m, i] < 0.2
+    # per-record z and the coverage of ±1.96 σ over the unflagged records
+    keep = ok & ~mc200.noise_coupled[m, :, i]
+    z = (f[keep] - f[keep].mean()) / sf[keep]
+    assert mc200.frequency_rms_z_unflagged[m, i] == pytest.approx(np.sqrt(np.mean(z ** 2)), rel=1e-12)
+    assert mc200.frequency_coverage_unflagged[m, i] == pytest.approx(np.mean(np.abs(z) <= 1.96), rel=1e-12)
+    assert "coverage of ±1.96 σ (f), unflagged" in mc200.report()
 
 
 # --------------------------------------------------------------------------- the tool

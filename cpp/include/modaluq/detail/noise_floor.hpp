@@ -37,9 +37,10 @@ inline constexpr std::uint64_t kNoiseFloorSeed = 0x6d6f64616c7571ull;  ///< "mod
 inline constexpr Index kDenseTrailingNorm = 64;                ///< exact SVD up to this size
 
 /// Rademacher signs (n_b x T): entry (b, t) from draw t n_b + b of the stream, +1 when its top bit
-/// is clear. E[vec dH vec dH^T] = T_H T_H^T exactly for dH = sum_b eps_b dH^b (eq. 5.10).
-inline Eigen::MatrixXd rademacher_signs(Index nb, Index draws) {
-    SplitMix64 rng{kNoiseFloorSeed};
+/// is clear. E[vec dH vec dH^T] = T_H T_H^T exactly for dH = sum_b eps_b dH^b (eq. 5.10). The
+/// bootstrap (bootstrap.hpp) draws its own signs from another seed.
+inline Eigen::MatrixXd rademacher_signs(Index nb, Index draws, std::uint64_t seed = kNoiseFloorSeed) {
+    SplitMix64 rng{seed};
     Eigen::MatrixXd eps(nb, draws);
     for (Index t = 0; t < draws; ++t)
         for (Index b = 0; b < nb; ++b) eps(b, t) = (rng.next() >> 63) ? -1.0 : 1.0;
