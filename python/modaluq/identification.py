@@ -120,7 +120,11 @@ def identify(y, u=None, *, fs: float, settings: Settings | None = None,
         noise-coupled are the robust spread (1.4826 MAD) of the pole over B identifications of H
         perturbed by its own estimation error (docs/uq-math.md §5.6), flagged per mode in
         ``Modes.bootstrapped``; orders up to k* are unchanged. Each draw costs an SVD of H and
-        the eigenvalues of the orders above k*. One record only (``identify_setups`` refuses it).
+        the eigenvalues of the orders above k*; over a full diagram B = 100 costs 5–10
+        identifications. It is for reading poles at given orders: the selected modes
+        (``select_modes``), which average over many orders, come out conservative with it (up to
+        2× too wide; docs/validation.md, "Issue 27" (g)), and are calibrated without it. One record
+        only (``identify_setups`` refuses it).
 
     frequency_range : (float, float), optional
         Band of interest (f_low, f_high) in Hz. The record is decimated (anti-aliased) to a
