@@ -35,7 +35,6 @@ import time
 import warnings
 
 import numpy as np
-import scipy.linalg
 
 from modaluq.identification import identify
 from modaluq.results import ModalUQWarning
@@ -63,33 +62,6 @@ STRUCTURES = {"chain": (dict(), (12, 24, 36)),
               "known": (dict(unknown_input_std=0.0), (12, 24, 36))}         # the measured input only
 COVERAGE_BAND = (0.93, 0.97)
 MEDIAN_BAND = (0.85, 1.18)
-MATCH_TOL = 0.05
-
-
-def poles(H, l, fs, orders):
-    """{order: (f, ξ)} of the poles (Im λ > 0) identified from H at each order (one SVD), by frequency."""
-    U, s, _ = np.linalg.svd(H, full_matrices=False)
-    out = {}
-    for n in orders:
-        G = U[:, :n] * np.sqrt(s[:n])
-        A = np.linalg.lstsq(G[:-l], G[l:], rcond=None)[0]
-        w = scipy.linalg.eigvals(A)
-        w = w[w.imag > 0]
-        mu = np.log(w) * fs
-        f = np.abs(mu) / (2 * np.pi)
-        o = np.argsort(f, kind="stable")                                    # frequency order, as the oracle
-        out[n] = (f[o], -mu.real[o] / np.abs(mu[o]))
-    return out
-
-
-def follow(f0, xi0, f, xi):
-    """For each reference pole (f0, ξ0) the nearest pole (f, ξ) of a draw, NaN beyond MATCH_TOL."""
-    if f.size == 0:
-        return np.full(f0.size, np.nan), np.full(f0.size, np.nan)
-    d = np.abs(f[None, :] / f0[:, None] - 1) + np.abs(xi[None, :] - xi0[:, None])
-    j = np.argmin(d, axis=1)
-    ok = np.abs(f[j] / f0 - 1) <= MATCH_TOL
-    return np.where(ok, f[j], np.nan), np.where(ok, xi[j], np.nan)
 
 
 def bootstrap(y, u, fs, orders, draws=DRAWS, scales=SCALES, seed=0, n_blocks=N_BLOCKS):
@@ -102,7 +74,7 @@ def bootstrap(y, u, fs, orders, draws=DRAWS, scales=SCALES, seed=0, n_blocks=N_B
     pm = 0 if u is None else R[2].shape[0]
     r = oracle._stack_r(cov)
     l = y.shape[1]
-    ref = poles(H, l, fs, orders)
+    ref = oracle.poles_at_orders(H, l, fs, orders)
     rng = np.random.default_rng(seed)
     eps = rng.standard_normal((cov["T_R"].shape[1], draws))
     out = {}
@@ -111,9 +83,9 @@ def bootstrap(y, u, fs, orders, draws=DRAWS, scales=SCALES, seed=0, n_blocks=N_B
         dr = sc * (cov["T_R"] @ eps)
         for t in range(draws):
             Hb = oracle.subspace_matrix(*oracle._unstack_r(r + dr[:, t], a, b, pm))
-            pb = poles(Hb, l, fs, orders)
+            pb = oracle.poles_at_orders(Hb, l, fs, orders)
             for n in orders:
-                samples[n][c, t, :, 0], samples[n][c, t, :, 1] = follow(*ref[n], *pb[n])
+                samples[n][c, t, :, 0], samples[n][c, t, :, 1] = oracle.follow_poles(*ref[n], *pb[n])
     for n in orders:
         smp = samples[n]
         found = np.mean(np.isfinite(smp[..., 0]), axis=1)                      # scales × modes

@@ -397,35 +397,48 @@ BOOTSTRAP_TOLERANCE = 0.05
 BOOTSTRAP_MIN_FOLLOWED = 0.8
 
 
+def poles_at_orders(H, l, fs, orders):
+    """{order: (f, xi)} of the poles (Im lambda > 0, by frequency) identified from H at each order:
+    one SVD, then each order's A by least squares and its eigenvalues only."""
+    U, s, _ = svd_sorted(H)
+    out = {}
+    for n in orders:
+        A, _ = system_matrices(U[:, :n] * np.sqrt(s[:n]), l)
+        w = scipy.linalg.eigvals(A)
+        mu = np.log(w[w.imag > 0]) * fs
+        f = np.abs(mu) / (2 * np.pi)
+        o = np.argsort(f, kind="stable")
+        out[n] = (f[o], -mu.real[o] / np.abs(mu[o]))
+    return out
+
+
+def follow_poles(f0, x0, f, xi, tolerance=BOOTSTRAP_TOLERANCE):
+    """For each reference pole (f0, x0) the pole (f, xi) nearest in |df|/f0 + |dxi|, NaN where it
+    is farther than ``tolerance`` in relative frequency (or there is none)."""
+    f0, x0 = np.asarray(f0), np.asarray(x0)
+    if len(f) == 0:
+        return np.full(f0.size, np.nan), np.full(f0.size, np.nan)
+    j = np.argmin(np.abs(f[None, :] / f0[:, None] - 1) + np.abs(xi[None, :] - x0[:, None]), axis=1)
+    ok = np.abs(f[j] / f0 - 1) <= tolerance
+    return np.where(ok, f[j], np.nan), np.where(ok, xi[j], np.nan)
+
+
 def bootstrap_std(H, T_H, l, fs, targets, draws):
     """§5.6 by its definition: draw d is H + unvec(T_H eps_d) with eps = rademacher_signs(n_b,
     draws, BOOTSTRAP_SEED); each order of ``targets`` ({order: (f, xi)} of the record's poles) is
-    identified from the draw's SVD (scipy eigenvalues, Im > 0), each pole follows the draw's pole
-    nearest in |df|/f + |dxi| when within BOOTSTRAP_TOLERANCE in f, and its sigma is 1.4826 times
-    the median absolute deviation from the median of the followed values (NaN when fewer than
-    ceil(0.8 draws) followed).  Returns {order: (sd_f, sd_xi)}."""
+    identified from the draw's SVD (:func:`poles_at_orders`), each pole follows the draw's pole
+    nearest in |df|/f + |dxi| when within BOOTSTRAP_TOLERANCE in f (:func:`follow_poles`), and its
+    sigma is 1.4826 times the median absolute deviation from the median of the followed values
+    (NaN when fewer than ceil(0.8 draws) followed).  Returns {order: (sd_f, sd_xi)}."""
     H = np.asarray(H, dtype=np.float64)
     a, b = H.shape
     eps = rademacher_signs(T_H.shape[1], draws, BOOTSTRAP_SEED)
-    n_max = max(targets)
     samples = {n: np.full((len(f), draws, 2), np.nan) for n, (f, _) in targets.items()}
     for d in range(draws):
-        Hb = H + unvec(T_H @ eps[:, d], a, b)
-        U, s, _ = svd_sorted(Hb)
+        drawn = poles_at_orders(H + unvec(T_H @ eps[:, d], a, b), l, fs, targets)
         for n, (f0, x0) in targets.items():
-            if n > n_max or len(f0) == 0:
-                continue
-            A, _ = system_matrices(U[:, :n] * np.sqrt(s[:n]), l)
-            w = scipy.linalg.eigvals(A)
-            w = w[w.imag > 0]
-            if w.size == 0:
-                continue
-            mu = np.log(w) * fs
-            f, xi = np.abs(mu) / (2 * np.pi), -mu.real / np.abs(mu)
-            dist = np.abs(f[None, :] / np.asarray(f0)[:, None] - 1) + np.abs(xi[None, :] - np.asarray(x0)[:, None])
-            j = np.argmin(dist, axis=1)
-            ok = np.abs(f[j] / f0 - 1) <= BOOTSTRAP_TOLERANCE
-            samples[n][ok, d, 0], samples[n][ok, d, 1] = f[j][ok], xi[j][ok]
+            if len(f0):
+                samples[n][:, d, 0], samples[n][:, d, 1] = follow_poles(f0, x0, *drawn[n])
     need = max(int(np.ceil(BOOTSTRAP_MIN_FOLLOWED * draws)), 2)
     out = {}
     for n, smp in samples.items():

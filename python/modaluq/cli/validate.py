@@ -33,7 +33,8 @@ KEYWORDS = {"records": "n_records", "samples": "n_samples", "order": "order", "b
             "past_block_rows": "past_block_rows", "n_blocks": "n_blocks", "seed": "seed", "processes": "processes",
             "tolerance": "match_tolerance", "unknown_input_std": "unknown_input_std",
             "damping_ratio": "damping_ratio", "n_dof": "n_dof", "input_dofs": "input_dofs",
-            "output_dofs": "output_dofs", "noise_coupling_limit": "noise_coupling_limit"}
+            "output_dofs": "output_dofs", "noise_coupling_limit": "noise_coupling_limit",
+            "bootstrap_draws": "bootstrap_draws"}
 
 #: Files written into ``--out``.
 OUTPUT_FILES = ("report.md", "results.csv", "summary.csv", "results.npz", "histograms_std.png",
@@ -79,12 +80,10 @@ def run_split_halves(args) -> int:
         check_output_paths([("--out", out / name) for name in ("report.md", "pairs.csv")], overwrite=args.overwrite)
     options = set(vars(args))
     try:
-        names = ("frequency_range", "start", "stop", "block_rows", "past_block_rows", "n_blocks")
+        names = ("frequency_range", "start", "stop", "block_rows", "past_block_rows", "n_blocks", "bootstrap_draws")
         given = {k: getattr(args, k) for k in names if getattr(args, k) is not None}
         if args.block_correlation_correction:
             given["block_correlation_correction"] = True
-        if args.bootstrap_draws is not None:
-            given["bootstrap_draws"] = args.bootstrap_draws
         settings = Settings(**given, **({"orders": args.order} if args.order is not None else {}))
         analysis = Analysis.from_file(args.split_halves, fs=args.fs, format=args.format,
                                       read_options=parse_read_options(args.read_option), outputs=args.outputs,
@@ -128,8 +127,6 @@ def run(args) -> int:
         given["freeze_noise"] = False
     if args.block_correlation_correction:
         given["block_correlation_correction"] = True
-    if args.bootstrap_draws is not None:
-        given["bootstrap_draws"] = args.bootstrap_draws
     results = monte_carlo(**{**given, "order": orders}, progress=not args.no_progress)
     text = "\n".join(r.report() for r in results)
     if out is not None:

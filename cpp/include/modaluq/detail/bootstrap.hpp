@@ -84,24 +84,23 @@ struct BootstrapStd {
 /// @param t_h      T_H, (a b) x n_b
 /// @param l        outputs
 /// @param fs       sampling frequency, Hz
-/// @param orders   the orders to bootstrap (target t)
-/// @param f, xi    the record's poles at orders[t] (f in Hz, xi a fraction)
+/// @param targets  the record's modes at each order to bootstrap (target t: its order, f and xi)
 /// @param draws    B
 /// @param threads  threads over the draws (the result does not depend on it)
 inline BootstrapStd bootstrap_std(const Eigen::MatrixXd& H, const Eigen::MatrixXd& t_h, Index l, double fs,
-                                  const std::vector<Index>& orders, const std::vector<const Eigen::VectorXd*>& f,
-                                  const std::vector<const Eigen::VectorXd*>& xi, Index draws, Index threads) {
-    const Index nt = static_cast<Index>(orders.size()), nb = t_h.cols();
+                                  const std::vector<const Modes*>& targets, Index draws, Index threads) {
+    const Index nt = static_cast<Index>(targets.size()), nb = t_h.cols();
     BootstrapStd out;
-    out.f.resize(orders.size());
-    out.xi.resize(orders.size());
+    out.f.resize(targets.size());
+    out.xi.resize(targets.size());
     if (nt == 0 || draws < 1) return out;
-    const Index n_max = *std::max_element(orders.begin(), orders.end());
+    Index n_max = 0;
+    for (const Modes* m : targets) n_max = std::max(n_max, m->order);
     const Eigen::MatrixXd eps = bootstrap_signs(nb, draws);
-    // samples[t][i * draws + d]: pole i of target t in draw d (NaN: not followed, or the draw failed)
-    std::vector<std::vector<double>> sf(orders.size()), sx(orders.size());
+    // sf[t][i * draws + d]: pole i of target t in draw d (NaN: not followed, or the draw failed)
+    std::vector<std::vector<double>> sf(targets.size()), sx(targets.size());
     for (Index t = 0; t < nt; ++t) {
-        sf[t].assign(static_cast<std::size_t>(f[t]->size() * draws), std::numeric_limits<double>::quiet_NaN());
+        sf[t].assign(static_cast<std::size_t>(targets[t]->n_modes() * draws), std::numeric_limits<double>::quiet_NaN());
         sx[t] = sf[t];
     }
     parallel_for(draws, threads, [&](Index d) {  // draws write disjoint samples
@@ -110,11 +109,12 @@ inline BootstrapStd bootstrap_std(const Eigen::MatrixXd& H, const Eigen::MatrixX
         try {
             const Realization re(Hb, l, std::min(n_max, std::min(Hb.rows() - l, Hb.cols())));
             for (Index t = 0; t < nt; ++t) {
-                if (orders[t] > re.max_order()) continue;
-                const DrawPoles p = draw_poles(re, orders[t], fs);
+                const Modes& m = *targets[t];
+                if (m.order > re.max_order()) continue;
+                const DrawPoles p = draw_poles(re, m.order, fs);
                 const Index np = static_cast<Index>(p.f.size());
-                for (Index i = 0; i < f[t]->size(); ++i) {
-                    const double f0 = (*f[t])(i), x0 = (*xi[t])(i);
+                for (Index i = 0; i < m.n_modes(); ++i) {
+                    const double f0 = m.frequency_hz(i), x0 = m.damping_ratio(i);
                     Index best = -1;
                     double dbest = std::numeric_limits<double>::infinity();
                     for (Index j = 0; j < np; ++j) {
@@ -133,7 +133,7 @@ inline BootstrapStd bootstrap_std(const Eigen::MatrixXd& H, const Eigen::MatrixX
     });
     const Index min_followed = static_cast<Index>(std::ceil(kBootstrapMinFollowed * static_cast<double>(draws)));
     for (Index t = 0; t < nt; ++t) {
-        const Index nm = f[t]->size();
+        const Index nm = targets[t]->n_modes();
         out.f[t] = Eigen::VectorXd::Constant(nm, std::numeric_limits<double>::quiet_NaN());
         out.xi[t] = out.f[t];
         for (Index i = 0; i < nm; ++i) {
@@ -157,18 +157,13 @@ inline BootstrapStd bootstrap_std(const Eigen::MatrixXd& H, const Eigen::MatrixX
 /// covariance stays positive semi-definite and the correlations are kept.
 inline void apply_bootstrap(std::vector<Modes>& modes, const Eigen::MatrixXd& H, const Eigen::MatrixXd& t_h, Index l,
                             double fs, Index k_star, Index draws, Index threads) {
-    std::vector<Index> orders;
-    std::vector<const Eigen::VectorXd*> f, xi;
     std::vector<Modes*> target;
     for (Modes& m : modes)
-        if (!m.degenerate && m.order > k_star && m.n_modes() > 0 && m.frequency_std.size() == m.n_modes()) {
-            orders.push_back(m.order);
-            f.push_back(&m.frequency_hz);
-            xi.push_back(&m.damping_ratio);
+        if (!m.degenerate && m.order > k_star && m.n_modes() > 0 && m.frequency_std.size() == m.n_modes())
             target.push_back(&m);
-        }
-    if (orders.empty()) return;
-    const BootstrapStd bs = bootstrap_std(H, t_h, l, fs, orders, f, xi, draws, threads);
+    if (target.empty()) return;
+    const BootstrapStd bs =
+        bootstrap_std(H, t_h, l, fs, std::vector<const Modes*>(target.begin(), target.end()), draws, threads);
     const Index np = 2 + 2 * l, nb = t_h.cols();
     for (std::size_t t = 0; t < target.size(); ++t) {
         Modes& m = *target[t];
