@@ -117,7 +117,7 @@ def worker(path: str, kind: str, settings: dict) -> dict:
         found = []
         for df in frames:
             refs = [list(df.columns).index(r) for r in REFERENCES]
-            res = modaluq.identify(df, fs=fs, references=refs, **settings)
+            res = modaluq.identify(df, fs=fs, references=refs, **settings)  # coupling_sketch: ignored
         cpu = time.process_time() - c0
         found = sorted(float(f) for f in res.select_modes().frequency_hz)  # the last setup's, as a check
     return {"kind": kind, "cpu": cpu, "stages": stages if kind == "merged" else None, "found_hz": found,
@@ -144,6 +144,8 @@ def main(argv=None) -> int:
     ap.add_argument("--roving", type=int, default=4, help="roving channels per setup (default 4; 2 references)")
     ap.add_argument("--n-blocks", type=int, default=SETTINGS["n_blocks"], help="blocks per setup (default 20)")
     ap.add_argument("--no-uncertainty", action="store_true", help="both sides without the uncertainty (a diagnosis)")
+    ap.add_argument("--coupling-sketch", type=int, default=None,
+                    help="the merge's coupling_sketch (default: the core's; 0 = the exact noise-coupling test)")
     ap.add_argument("--settings", help=argparse.SUPPRESS)
     ap.add_argument("--worker", choices=["merged", "single"], help=argparse.SUPPRESS)
     ap.add_argument("--data", help=argparse.SUPPRESS)
@@ -154,6 +156,8 @@ def main(argv=None) -> int:
     settings = dict(SETTINGS, orders=list(range(2, args.max_order + 1, 2)), n_blocks=args.n_blocks)
     if args.no_uncertainty:
         settings["uncertainty"] = False
+    if args.coupling_sketch is not None:
+        settings["coupling_sketch"] = args.coupling_sketch
 
     import modaluq
     from modaluq import _core

@@ -67,6 +67,7 @@ void modaluq::python::bind_identify(py::module_& m) {
         .def_readwrite("noise_coupling_limit", &IdentifyOptions::noise_coupling_limit)
         .def_readwrite("block_correlation_correction", &IdentifyOptions::block_correlation_correction)
         .def_readwrite("bootstrap_draws", &IdentifyOptions::bootstrap_draws)
+        .def_readwrite("coupling_sketch", &IdentifyOptions::coupling_sketch)
         .def("validate", &IdentifyOptions::validate)
         .def_property_readonly_static("max_threads", [](py::object) { return IdentifyOptions::kMaxThreads; })
         .def_property_readonly_static("min_bootstrap_draws",

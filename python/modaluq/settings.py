@@ -183,6 +183,9 @@ class Settings:
     block_correlation_correction: bool = _IDENTIFY["block_correlation_correction"]
     #: draws of the bootstrap of σ_f, σ_ξ above the noise floor (docs/uq-math.md §5.6); 0: off
     bootstrap_draws: int = _IDENTIFY["bootstrap_draws"]
+    #: a campaign's merge only: block combinations per setup its noise-coupling test uses
+    #: (docs/uq-math.md §13.4); 0: every block
+    coupling_sketch: int = _IDENTIFY["coupling_sketch"]
     # preprocessing (preprocess.py), which the core does not know
     frequency_range: Optional[Tuple[float, float]] = None  #: band of interest (f_low, f_high), Hz
     start: Optional[float] = None                    #: window start, s from the first sample
@@ -214,6 +217,7 @@ class Settings:
         if 0 < self.bootstrap_draws < _core.IdentifyOptions.min_bootstrap_draws:
             raise ValueError(f"bootstrap_draws must be 0 (off) or >= {_core.IdentifyOptions.min_bootstrap_draws}, "
                              f"got {self.bootstrap_draws}")
+        put("coupling_sketch", check_integer("coupling_sketch", self.coupling_sketch, minimum=0))
         if isinstance(self.frequency_range, list):  # checked against fs by preprocess()
             put("frequency_range", tuple(self.frequency_range))
 

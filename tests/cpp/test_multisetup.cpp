@@ -88,7 +88,8 @@ TEST_CASE("the modular merge equals the NumPy reference (oracle_multisetup), out
     // columns are frozen (§13.4), and each pole's sigma is the frozen or the unfrozen one by its rho.
     for (bool io : {false, true}) {
         CAPTURE(io);
-        const Campaign c = make_campaign(io);
+        Campaign c = make_campaign(io);
+        c.options.coupling_sketch = 0;  // the reference's rho is from every block
         const modaluq::SetupsIdentification id = modaluq::identify_setups(c.setups, c.options);
         REQUIRE(id.dof_setup.size() == size_t(mc::n_global));
         CHECK(id.n_blocks == 3 * mc::n_blocks);
@@ -177,6 +178,7 @@ TEST_CASE("a one-setup campaign equals identify, unfrozen and frozen above the n
         c.setups.resize(1);
         c.options.orders = {4, 8, 10, 13, 14};
         c.options.freeze_noise = freeze;
+        c.options.coupling_sketch = 0;  // identify's rho is from every block
         const auto merged = modaluq::identify_setups(c.setups, c.options);
         const auto single = modaluq::identify(c.setups[0].covariances, c.options);
         CHECK(rel(merged.singular_values, single.singular_values) < 1e-14);
@@ -199,6 +201,64 @@ TEST_CASE("a one-setup campaign equals identify, unfrozen and frozen above the n
             CHECK(rel(a.frequency_damping_factor, b.frequency_damping_factor) < 1e-8);
         }
     }
+}
+
+TEST_CASE("the sketched noise-coupling test follows its definition") {
+    // coupling_sketch = s (§13.4): rho from s combinations of each setup's blocks; a flagged pole's
+    // rows are its frozen rows times rho; an unflagged pole's are the frozen rows, as without the
+    // sketch; a sketch as large as every setup's blocks is no sketch (the exact test). The sketch
+    // itself (signs, scaling) is checked against the NumPy reference (test_multisetup_core.py).
+    for (bool io : {false, true}) {
+        CAPTURE(io);
+        Campaign c = make_campaign(io);
+        const auto run = [&](Index sketch, double limit) {
+            Campaign d = c;
+            d.options.coupling_sketch = sketch;
+            d.options.noise_coupling_limit = limit;
+            return modaluq::identify_setups(d.setups, d.options);
+        };
+        // nothing flagged: every pole's rows are its frozen ones; then a limit between its rhos
+        const auto frozen_rows = run(3, 1e300);
+        const auto& top = frozen_rows.at_order(14);
+        const double limit = std::sqrt(top.noise_coupling.minCoeff() * top.noise_coupling.maxCoeff());
+        REQUIRE(top.noise_coupling.maxCoeff() > 1.01 * top.noise_coupling.minCoeff());
+        const auto exact = run(0, limit), sketched = run(3, limit);
+        const auto whole = run(mc::n_blocks, limit);  // s >= n_b: every setup keeps its blocks
+        Index flagged = 0, unflagged_above = 0;
+        for (Index n : c.options.orders) {
+            CAPTURE(n);
+            const auto &e = exact.at_order(n), &s = sketched.at_order(n), &f = frozen_rows.at_order(n),
+                       &w = whole.at_order(n);
+            REQUIRE(s.n_modes() == e.n_modes());
+            CHECK(rel(s.frequency_hz, e.frequency_hz) == 0.0);  // the point estimates do not depend on it
+            CHECK(rel(w.noise_coupling, e.noise_coupling) < 1e-12);
+            CHECK((w.noise_coupled == e.noise_coupled).all());
+            CHECK(rel(w.covariance, e.covariance) < 1e-12);
+            CHECK(rel(f.noise_coupling, s.noise_coupling) == 0.0);  // the limit does not move rho
+            CHECK((f.noise_coupled == false).all());
+            for (Index i = 0; i < s.n_modes(); ++i) {
+                CAPTURE(i);
+                CHECK(s.noise_coupled(i) == !(s.noise_coupling(i) <= limit));
+                if (n <= 12) CHECK(s.noise_coupling(i) == 1.0);  // below every floor: no test, no sketch
+                if (s.noise_coupled(i)) {
+                    ++flagged;
+                    const double rho = s.noise_coupling(i);
+                    CHECK(rel(s.covariance.col(i), rho * rho * f.covariance.col(i)) < 1e-12);
+                    CHECK(s.frequency_std(i) == doctest::Approx(rho * f.frequency_std(i)).epsilon(1e-12));
+                } else {
+                    if (n > 12) ++unflagged_above;
+                    CHECK(rel(s.covariance.col(i), f.covariance.col(i)) == 0.0);
+                    if (!e.noise_coupled(i)) CHECK(rel(s.covariance.col(i), e.covariance.col(i)) < 1e-12);
+                }
+            }
+        }
+        MESSAGE("io=", io, ": ", flagged, " poles flagged by the sketch, ", unflagged_above, " unflagged above order 12");
+        CHECK(flagged > 0);
+        CHECK(unflagged_above > 0);
+    }
+    Campaign c = make_campaign(false);
+    c.options.coupling_sketch = -1;
+    CHECK_THROWS_AS(modaluq::identify_setups(c.setups, c.options), modaluq::invalid_argument);
 }
 
 TEST_CASE("each merged pole's factor rows of f and xi reproduce its covariance's [f, xi] block") {

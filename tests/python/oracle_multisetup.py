@@ -228,10 +228,11 @@ def merge_gamma(camp, n):
     return G
 
 
-def merge_gamma_perturbation(camp, n, frozen=False):
+def merge_gamma_perturbation(camp, n, frozen=False, sketch=None):
     """dΓ_g per block column of the concatenated factor (13.5)-(13.7): a list with, per
     setup j, the (a_g × n × n_b,j) perturbation of Γ_g caused by setup j's blocks; ``frozen``:
-    from each setup's frozen dΓ (§13.4)."""
+    from each setup's frozen dΓ (§13.4); ``sketch``: per setup j an (n_b,j × s_j) matrix whose
+    columns combine its blocks (the noise-coupling test's sketch), the result then per column."""
     s0 = camp.setups[0]
     B = s0["Gamma"][s0["rows_ref"], :n]
     pre = []
@@ -243,6 +244,8 @@ def merge_gamma_perturbation(camp, n, frozen=False):
     out = []
     for j, st in enumerate(camp.setups):
         dG = st["dGamma_frozen" if frozen else "dGamma"][:, :n, :]
+        if sketch is not None:
+            dG = np.einsum("ank,kt->ant", dG, sketch[j])
         nb = dG.shape[2]
         D = np.zeros((camp.p * camp.l_A, n, nb))
         dX = dG[st["rows_ref"]]
@@ -345,9 +348,23 @@ def prepare_setups(records, p, q, n_blocks, references):
     return out
 
 
+COUPLING_SKETCH_SEED = 0x736B65746368  # "sketch", the core's detail::kCouplingSketchSeed
+
+
+def coupling_sketch_matrices(n_blocks, s):
+    """Per setup j the (n_b,j × s_j) sketch of the noise-coupling test (§13.4): s_j = min(s, n_b,j)
+    Rademacher columns / √s_j from seed COUPLING_SKETCH_SEED + j, the identity if s ≥ n_b,j."""
+    out = []
+    for j, nb in enumerate(n_blocks):
+        sj = min(int(s), int(nb))
+        out.append(oracle.rademacher_signs(nb, sj, COUPLING_SKETCH_SEED + j) / np.sqrt(sj) if sj < nb
+                   else np.eye(nb))
+    return out
+
+
 def identify_modular(setups, *, fs, p, orders, ref_index=None, uncertainty=True,
                      pool_references=False, freeze_noise=False, noise_floor_factor=1.5,
-                     noise_coupling_limit=20.0):
+                     noise_coupling_limit=20.0, coupling_sketch=0):
     """Modular multi-setup identification at every order (13.2)-(13.7).
 
     ``setups`` as for :class:`Campaign` (e.g. from :func:`prepare_setups`).  Returns
@@ -362,7 +379,10 @@ def identify_modular(setups, *, fs, p, orders, ref_index=None, uncertainty=True,
     ``freeze_noise`` (the core's default; off here, the unfrozen merge being the reference of
     §13.7): each setup's columns from its own noise floor k*_j on are frozen (§13.4); at an
     order n above some k*_j each mode gets the frozen factor unless its noise coupling ρ (5.14)
-    exceeds ``noise_coupling_limit`` (results then carry noise_coupling, noise_coupled)."""
+    exceeds ``noise_coupling_limit`` (results then carry noise_coupling, noise_coupled).
+    ``coupling_sketch`` = s > 0 (the core's default 4): ρ from the unfrozen pass on s signed
+    combinations of each setup's blocks, compared with the frozen rows combined alike, and a
+    flagged mode's factor is its frozen one times ρ (when some setup has more than s blocks)."""
     orders = [int(o) for o in np.atleast_1d(orders)]
     camp = Campaign(setups, p, max(orders), uncertainty=uncertainty, pool_references=pool_references,
                     freeze_noise=freeze_noise, noise_floor_factor=noise_floor_factor)
@@ -378,11 +398,21 @@ def identify_modular(setups, *, fs, p, orders, ref_index=None, uncertainty=True,
                 dGf = np.concatenate(merge_gamma_perturbation(camp, n, frozen=True), axis=2)
                 _, _, dAf, dCf = system_perturbation(Gg, dGf, camp.l_A, camp.l_g)
                 fac_f = modal_perturbation(A, C, dAf, dCf, fs, ref_index=ref_index)[1]
-                rho = oracle.noise_coupling(np.linalg.norm(fac[:, :2, :], axis=2),
-                                            np.linalg.norm(fac_f[:, :2, :], axis=2))
-                use = rho <= noise_coupling_limit
-                fac = fac.copy()
-                fac[use] = fac_f[use]
+                nbs = [st["dGamma"].shape[2] for st in camp.setups]
+                if 0 < coupling_sketch < max(nbs):  # else no setup is sketched: the exact test
+                    S = coupling_sketch_matrices(nbs, coupling_sketch)
+                    dGs = np.concatenate(merge_gamma_perturbation(camp, n, sketch=S), axis=2)
+                    _, _, dAs, dCs = system_perturbation(Gg, dGs, camp.l_A, camp.l_g)
+                    fac_s = modal_perturbation(A, C, dAs, dCs, fs, ref_index=ref_index)[1]
+                    rho = oracle.noise_coupling(np.linalg.norm(fac_s[:, :2, :], axis=2),
+                                                np.linalg.norm(fac_f[:, :2, :] @ scipy.linalg.block_diag(*S), axis=2))
+                    fac = fac_f * np.where(rho <= noise_coupling_limit, 1.0, np.minimum(rho, 1e150))[:, None, None]
+                else:
+                    rho = oracle.noise_coupling(np.linalg.norm(fac[:, :2, :], axis=2),
+                                                np.linalg.norm(fac_f[:, :2, :], axis=2))
+                    use = rho <= noise_coupling_limit
+                    fac = fac.copy()
+                    fac[use] = fac_f[use]
         else:
             A = oracle.system_matrices(Gg, camp.l_A)[0]
             C = Gg[:camp.l_g].copy()

@@ -2,7 +2,8 @@
 equals the NumPy reference ``oracle_multisetup.identify_modular`` (docs/uq-math.md §13) on the
 simulated deck campaign: f, ξ, the global shapes, their σ and covariance, output-only and
 input/output, at every order of a small diagram, with each setup's noise columns frozen (the
-default, §13.4) and without."""
+default, §13.4, with the noise-coupling test on its default sketch of the blocks and on every
+block) and without."""
 
 import os
 import sys
@@ -46,8 +47,12 @@ def _core_setups(camp, io):
     return out
 
 
-def _options(fs, uncertainty=True, freeze_noise=True):
+def _options(fs, uncertainty=True, freeze_noise=True, coupling_sketch=None, noise_coupling_limit=None):
     o = _core.IdentifyOptions()
+    if noise_coupling_limit is not None:
+        o.noise_coupling_limit = noise_coupling_limit
+    if coupling_sketch is not None:
+        o.coupling_sketch = coupling_sketch
     o.fs = fs
     o.block_rows = P
     o.past_block_rows = P
@@ -66,16 +71,25 @@ def _rel_cols(a, b):
     return float(np.max(num / den)) if a.size else 0.0
 
 
-@pytest.fixture(scope="module", params=["oo", "io", "oo-unfrozen", "io-unfrozen"])
+@pytest.fixture(scope="module", params=["oo", "io", "oo-unfrozen", "io-unfrozen", "oo-every-block", "io-every-block"])
 def case(request):
     io = request.param.startswith("io")
     freeze = not request.param.endswith("unfrozen")
+    # the noise-coupling test: the core's default sketch (4 of the NB = 10 blocks) or every block
+    sketch = 0 if request.param.endswith("every-block") else _core.IdentifyOptions().coupling_sketch
+    assert 0 < _core.IdentifyOptions().coupling_sketch < NB  # the default sketch is exercised
+    # a limit low enough that some poles above the true order are flagged (their rho is 1-18 here)
+    limit = 3.0
     camp = _campaign(io)
-    ident = _core.identify_setups(_core_setups(camp, io), _options(camp.fs, freeze_noise=freeze))
+    ident = _core.identify_setups(_core_setups(camp, io), _options(camp.fs, freeze_noise=freeze,
+                                                                   coupling_sketch=sketch, noise_coupling_limit=limit))
     ref, rcamp = om.identify_modular(
         om.prepare_setups([(s.y, s.u if io else None) for s in camp.setups], P, P, NB,
                           [s.references for s in camp.setups]),
-        fs=camp.fs, p=P, orders=ORDERS, freeze_noise=freeze)
+        fs=camp.fs, p=P, orders=ORDERS, freeze_noise=freeze, coupling_sketch=sketch, noise_coupling_limit=limit)
+    if freeze:  # flagged and unflagged poles above the floor: both rows of the test are exercised
+        flags = np.concatenate([np.asarray(m.noise_coupled) for m in ident.modes if m.order > TRUE_ORDER])
+        assert flags.any() and not flags.all(), flags
     k_star = [st["k_star"] for st in rcamp.setups]
     assert list(ident.setup_significant_singular_values) == k_star
     if freeze:  # the frozen path is exercised: some setup's floor lies below the highest order

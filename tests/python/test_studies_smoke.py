@@ -48,7 +48,7 @@ def test_every_study_is_smoke_tested():
                                            "io_block_bias.py", "poser_mc.py", "pyoma2_multisetup.py",
                                            "split_halves_pool.py", "block_scaling_mc.py",
                                            "above_order_diagnosis.py", "partial_unfreeze_mc.py",
-                                           "bootstrap_sigma_mc.py"}
+                                           "bootstrap_sigma_mc.py", "coupling_sketch.py"}
     assert scripts == tested
 
 
@@ -183,6 +183,14 @@ def test_poser_mc(capsys):
     out = _module("poser_mc").main(n=2, configs=["diagram", "auto", "output-only"])  # frequency_range only
     assert "poser" not in out["output-only"][0] and out["output-only"][0]["modular"].shape == (6, 4)
     assert "frequency_range (0.5, 11) Hz only" in capsys.readouterr().out
+
+
+def test_coupling_sketch(capsys):
+    rows = _module("coupling_sketch").main(["1", "--setups", "3", "--samples", "20000", "--sketch", "4"])
+    r = rows[4]
+    flagged = r["both"] + r["exact_only"] + r["sketch_only"] + r["neither"]
+    assert flagged == len(r["log_rho"]) > 0 and r["same_selection"] in (0, 1)
+    assert "| s | merge CPU s | flagged both" in capsys.readouterr().out
 
 
 def test_pyoma2_multisetup(capsys, monkeypatch):

@@ -58,6 +58,13 @@ struct IdentifyOptions {
     /// (Modes::bootstrapped). 0 turns it off (the first-order sigma everywhere); orders up to k*
     /// are never touched. Each draw costs an SVD of H and the eigenvalues of every order above k*.
     Index bootstrap_draws = 0;
+    /// For a campaign's merge (identify_setups) only: the sketch size s of its noise-coupling
+    /// test (docs/uq-math.md §13.4). Where a setup's noise floor freezes columns, rho (5.14) of
+    /// each merged pole is computed from s signed combinations of each setup's blocks instead of
+    /// every block, and a flagged pole's factor rows are its frozen rows times rho. 0 = every
+    /// block (the exact unfrozen pass, which costs as much as the frozen one again). One record
+    /// computes rho exactly at no extra cost and ignores it.
+    Index coupling_sketch = 4;
 
     void validate() const {
         detail::require(std::isfinite(fs) && fs > 0.0, "fs must be a finite sampling frequency > 0 Hz, got ", fs);
@@ -73,6 +80,7 @@ struct IdentifyOptions {
         detail::require(bootstrap_draws >= 0, "bootstrap_draws must be >= 0, got ", bootstrap_draws);
         detail::require(bootstrap_draws == 0 || bootstrap_draws >= kMinBootstrapDraws,
                         "bootstrap_draws must be 0 (off) or >= ", kMinBootstrapDraws, ", got ", bootstrap_draws);
+        detail::require(coupling_sketch >= 0, "coupling_sketch must be >= 0 (0 = every block), got ", coupling_sketch);
         detail::require(threads >= 1, "threads must be >= 1, got ", threads);
         detail::require(threads <= kMaxThreads, "threads must be <= ", kMaxThreads, ", got ", threads);
     }

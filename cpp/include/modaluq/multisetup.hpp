@@ -39,6 +39,7 @@
 #include "covariance.hpp"
 #include "detail/eigen_perturbation.hpp"
 #include "detail/gemm.hpp"
+#include "detail/noise_floor.hpp"
 #include "detail/parallel.hpp"
 #include "detail/svd_perturbation.hpp"
 #include "identify.hpp"
@@ -164,6 +165,46 @@ inline void add_group_q(const Eigen::Ref<const Eigen::MatrixXd>& g, const Eigen:
     gemm(q1, g.topRows(rows), Op::T, dg.topRows(rows), Op::N, 1.0, 1.0);
     gemm(q2, g.bottomRows(rows), Op::T, dg.topRows(rows), Op::N, 1.0, 1.0);
     gemm(q3, g.topRows(rows), Op::T, dg.bottomRows(rows), Op::N, 1.0, 1.0);
+}
+
+/// Seed of the noise-coupling test's sketch (IdentifyOptions::coupling_sketch): setup j draws its
+/// signs from kCouplingSketchSeed + j, so the sketch depends on the data's layout only.
+inline constexpr std::uint64_t kCouplingSketchSeed = 0x736b65746368ull;  ///< "sketch"
+
+/// Blocks combined by the columns of s (n_b x c): m holds n_b equal blocks side by side
+/// (rows x (w n_b), block k in columns k w ..), the result c blocks, block t = sum_k s(k, t) block k.
+inline Eigen::MatrixXd combine_blocks(const Eigen::MatrixXd& m, const Eigen::MatrixXd& s) {
+    const Index nb = s.rows();
+    Eigen::MatrixXd out(m.rows(), nb > 0 ? m.cols() / nb * s.cols() : 0);
+    if (m.size() == 0 || out.size() == 0) return out;
+    const Index per = m.size() / nb;  // a block, read as one column (column-major)
+    Eigen::Map<Eigen::MatrixXd> o(out.data(), per, s.cols());
+    gemm(o, Eigen::Map<const Eigen::MatrixXd>(m.data(), per, nb), Op::N, s, Op::N);
+    return out;
+}
+
+/// The setup as the unfrozen pass of the noise-coupling test sees it through the sketch s
+/// (n_b x c): its c blocks are the combinations of its blocks by the columns of s. Every per-block
+/// term of that pass is linear in the block's dGamma, so this is the pass on the combined blocks.
+inline SetupGamma sketched_setup(const SetupGamma& g, const Eigen::MatrixXd& s) {
+    SetupGamma out;
+    out.l = g.l;
+    out.r = g.r;
+    out.w = g.w;
+    out.nb = s.cols();
+    out.n_max = g.n_max;
+    out.moving = g.moving;
+    out.x = g.x;
+    out.m = g.m;
+    out.guu = g.guu;
+    out.gud = g.gud;
+    out.dx = combine_blocks(g.dx, s);
+    out.dm = combine_blocks(g.dm, s);
+    out.sa = combine_blocks(g.sa, s);
+    out.sb = combine_blocks(g.sb, s);
+    out.cx = combine_blocks(g.cx, s);
+    out.dxb = combine_blocks(g.dxb, s);
+    return out;  // k_star stays "nothing frozen": this pass is the unfrozen one
 }
 
 }  // namespace detail
@@ -375,12 +416,46 @@ inline SetupsIdentification identify_setups(const std::vector<SetupData>& setups
     std::vector<Index> col0(ns + 1, 0);
     for (Index j = 0; j < ns; ++j) col0[j + 1] = col0[j] + sg[j].nb;
     const Index nb_total = col0[ns];
+    // The noise-coupling test's sketch (IdentifyOptions::coupling_sketch, §13.4): setup j's n_b,j
+    // blocks combined into s_j = min(s, n_b,j) columns by Rademacher signs / sqrt(s_j) (a setup
+    // with at most s blocks keeps them), so the unfrozen pass, needed only for rho where a setup
+    // freezes, costs about s / n_b of the frozen one. `sketch` (nb_total x its columns) carries
+    // the frozen factor rows into the same combinations, so rho compares like with like. When no
+    // setup has more than s blocks, nothing is sketched: the exact pass.
+    const bool sketch_on =
+        unc && options.coupling_sketch > 0 &&
+        std::any_of(sg.begin(), sg.end(), [](const detail::SetupGamma& g) { return g.freezes(); }) &&
+        std::any_of(sg.begin(), sg.end(), [&](const detail::SetupGamma& g) { return g.nb > options.coupling_sketch; });
+    std::vector<detail::SetupGamma> sk;
+    std::vector<Index> col0s(ns + 1, 0);
+    Eigen::MatrixXd sketch;
+    if (sketch_on) {
+        std::vector<Eigen::MatrixXd> signs(ns);
+        for (Index j = 0; j < ns; ++j) {
+            const Index nbj = sg[j].nb, sj = std::min(options.coupling_sketch, nbj);
+            signs[j] = sj < nbj ? Eigen::MatrixXd(detail::rademacher_signs(nbj, sj, detail::kCouplingSketchSeed + j) /
+                                                  std::sqrt(static_cast<double>(sj)))
+                                : Eigen::MatrixXd(Eigen::MatrixXd::Identity(nbj, nbj));
+            col0s[j + 1] = col0s[j] + sj;
+        }
+        sketch = Eigen::MatrixXd::Zero(nb_total, col0s[ns]);
+        sk.resize(ns);
+        for (Index j = 0; j < ns; ++j) {
+            sketch.block(col0[j], col0s[j], sg[j].nb, signs[j].cols()) = signs[j];
+            sk[j] = detail::sketched_setup(sg[j], signs[j]);
+        }
+    }
     // Row offset of each group in C (l_g rows): references, then the moving rows of each setup.
     std::vector<Index> c0(ns + 1, r);
     for (Index j = 0; j < ns; ++j) c0[j + 1] = c0[j] + sg[j].w;
 
     const Index n_orders = static_cast<Index>(options.orders.size());
     out.modes.resize(n_orders);
+    // Every order's Q matrices and stage-4 products in storage made once, for the largest order
+    // (both passes of an order use it in turn): no allocation and page faults of tens of MB per order.
+    detail::BlockQ q_store;
+    detail::PerturbationBuffers z_store;
+    if (unc) q_store = detail::BlockQ(nb_total, std::min(n_max, n_real), l_g, true);
     for (Index oi = 0; oi < n_orders; ++oi) {
         const Index n = options.orders[oi];
         Modes modes = detail::degenerate_modes(n, l_g, unc);
@@ -462,10 +537,12 @@ inline SetupsIdentification identify_setups(const std::vector<SetupData>& setups
                 // The Q matrices of every block of every setup, with each setup's noise columns
                 // frozen or not (§13.4). A block's dX and dM have c <= n columns, the others 0:
                 // frozen, only the first k*_j move (the rest only scale, a change of basis).
-                const auto block_q = [&](bool frozen) {
-                    detail::BlockQ bq(nb_total, n, l_g, true);  // formed at this order only: blocked
+                const auto block_q = [&](bool frozen, const std::vector<detail::SetupGamma>& setups_q,
+                                         const std::vector<Index>& first) -> const detail::BlockQ& {
+                    detail::BlockQ& bq = q_store;  // formed at this order only: blocked, in reused storage
+                    bq.reshape(first[ns], n);
                     for (Index j = 0; j < ns; ++j) {
-                        const detail::SetupGamma& g = sg[j];
+                        const detail::SetupGamma& g = setups_q[j];
                         detail::parallel_for(g.nb, options.threads, [&](Index k) {
                             const auto dX = g.dX(k, n, frozen);
                             const auto dM = g.dM(k, n, frozen);
@@ -533,21 +610,23 @@ inline SetupsIdentification identify_setups(const std::vector<SetupData>& setups
                                 b += tmp + tmp.transpose();
                                 auto q4j = q4.middleRows(c0[j], g.w);
                                 q4j.noalias() = dM.topRows(g.w) * T[j];
-                                q4j.noalias() += sg[j].m.topRows(g.w).leftCols(n) * dT;
-                                bq.set(col0[j] + k, a, b, q4);
+                                q4j.noalias() += g.m.topRows(g.w).leftCols(n) * dT;
+                                bq.set(first[j] + k, a, b, q4);
                                 
                                 
                                 return;
                             }
                             
-                            bq.set(col0[j] + k, q3 + q2.transpose(), q1 + q1.transpose(), q4);
+                            bq.set(first[j] + k, q3 + q2.transpose(), q1 + q1.transpose(), q4);
                         });
                     }
-                    return bq;
+                    return q_store;
                 };
                 // Stages 4-5 (§9) unchanged on Gamma_g, all blocks of all setups at once; where a
                 // setup has a frozen column among the first n, frozen in full and unfrozen for rho
-                // (5.14) and the shapes of flagged poles, as UncertaintyPropagator::modes does.
+                // (5.14), as UncertaintyPropagator::modes does: on every block (coupling_sketch 0),
+                // with the flagged poles' shapes, or on the sketch, a flagged pole's rows then being
+                // its frozen rows times rho.
                 const detail::OrderContext ctx(eig, ss, R);
                 const Index nm = modes.n_modes();
                 const bool frozen = std::any_of(sg.begin(), sg.end(), [&](const detail::SetupGamma& g) {
@@ -557,32 +636,39 @@ inline SetupsIdentification identify_setups(const std::vector<SetupData>& setups
                 Eigen::MatrixXcd dlam;
                 std::vector<Eigen::MatrixXcd> dshape;
                 std::vector<Eigen::MatrixXd> ut_f;
+                const bool sketched = frozen && sketch_on;
                 if (frozen) {
                     Eigen::MatrixXcd dlam_f;
                     std::vector<Eigen::MatrixXcd> dshape_f;
-                    detail::eigen_perturbation_blocks(ctx, block_q(true), dlam_f, dshape_f);
+                    detail::eigen_perturbation_blocks(ctx, block_q(true, sg, col0), dlam_f, dshape_f, {}, &z_store);
                     for (Index i = 0; i < nm; ++i)
                         ut_f.push_back(detail::modal_perturbation(ctx.lambda(i), options.fs,
                                                                   ss.C.cast<cd>() * ctx.phi.col(i),
                                                                   modes.reference_component(i), dlam_f.row(i),
                                                                   dshape_f[i]));
-                    detail::eigen_perturbation_blocks(ctx, block_q(false), dlam, dshape, [&](Index i) {
-                        const double rho = detail::noise_coupling(
-                            detail::frequency_damping_perturbation(ctx.lambda(i), options.fs, dlam.row(i)), ut_f[i]);
-                        modes.noise_coupling(i) = rho;
-                        modes.noise_coupled(i) = !(rho <= options.noise_coupling_limit);
-                        return bool(modes.noise_coupled(i));
-                    });
+                    detail::eigen_perturbation_blocks(
+                        ctx, sketched ? block_q(false, sk, col0s) : block_q(false, sg, col0), dlam, dshape, [&](Index i) {
+                            const Eigen::MatrixXd plain =
+                                detail::frequency_damping_perturbation(ctx.lambda(i), options.fs, dlam.row(i));
+                            const double rho =
+                                sketched ? detail::noise_coupling(plain, ut_f[i].topRows(2) * sketch)
+                                         : detail::noise_coupling(plain, ut_f[i]);
+                            modes.noise_coupling(i) = rho;
+                            modes.noise_coupled(i) = !(rho <= options.noise_coupling_limit);
+                            return !sketched && bool(modes.noise_coupled(i));
+                        }, &z_store);
                 } else {
-                    detail::eigen_perturbation_blocks(ctx, block_q(false), dlam, dshape);
+                    detail::eigen_perturbation_blocks(ctx, block_q(false, sg, col0), dlam, dshape, {}, &z_store);
                 }
                 // The factor rows of each pole (the frozen or the plain, by its flag), as for one record.
                 for (Index i = 0; i < nm; ++i) {
                     const Eigen::MatrixXd ut =
-                        (frozen && !modes.noise_coupled(i))
-                            ? ut_f[i]
-                            : detail::modal_perturbation(ctx.lambda(i), options.fs, ss.C.cast<cd>() * ctx.phi.col(i),
-                                                         modes.reference_component(i), dlam.row(i), dshape[i]);
+                        !frozen ? detail::modal_perturbation(ctx.lambda(i), options.fs, ss.C.cast<cd>() * ctx.phi.col(i),
+                                                             modes.reference_component(i), dlam.row(i), dshape[i])
+                        : !modes.noise_coupled(i) ? ut_f[i]
+                        : sketched ? Eigen::MatrixXd(std::min(modes.noise_coupling(i), 1e150) * ut_f[i])  // inf rho: inf sigma
+                                   : detail::modal_perturbation(ctx.lambda(i), options.fs, ss.C.cast<cd>() * ctx.phi.col(i),
+                                                                modes.reference_component(i), dlam.row(i), dshape[i]);
                     detail::set_mode_uncertainty(modes, i, ut, block_seconds);
                 }
             }

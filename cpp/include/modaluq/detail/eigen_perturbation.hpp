@@ -48,6 +48,12 @@ struct OrderContext {
     }
 };
 
+/// Buffers eigen_perturbation_blocks can reuse from call to call (a merge calls it twice at every
+/// order): grown to the largest order's size, never shrunk, so their pages are touched once.
+struct PerturbationBuffers {
+    Eigen::VectorXd za, zb, z4;
+};
+
 /// Stage 4 for all blocks at once, the production path (equal to eigen_perturbation per
 /// block; tested). Restructured so that the work is three GEMMs for all blocks:
 ///   Z_k = Qa_k [Re phi, Im phi] - (Qb_k [Re phi, Im phi]) Lambda   (leading n x n of Qa_k)
@@ -61,13 +67,22 @@ struct OrderContext {
 /// shapes of flagged poles only).
 inline void eigen_perturbation_blocks(const OrderContext& ctx, const BlockQ& q, Eigen::MatrixXcd& dlambda,
                                       std::vector<Eigen::MatrixXcd>& dshape,
-                                      const std::function<bool(Index)>& with_shape = {}) {
+                                      const std::function<bool(Index)>& with_shape = {},
+                                      PerturbationBuffers* buffers = nullptr) {
     const Eigen::Index n = ctx.phi.rows(), nm = ctx.phi.cols(), l = q.l, nb = q.nb;
     const Eigenstructure& e = *ctx.eig;
     Eigen::MatrixXd ph(n, 2 * nm);
     ph << ctx.phi.real(), ctx.phi.imag();
     require(!q.blocked || n == q.n_max, "eigen_perturbation_blocks: a blocked BlockQ holds one order");
-    Eigen::MatrixXd za(nb * n, 2 * nm), zb(nb * n, 2 * nm);
+    Eigen::VectorXd own_a, own_b, own_4;
+    const auto buffer = [&](Eigen::VectorXd PerturbationBuffers::*member, Eigen::VectorXd& own, Index rows,
+                            Index cols) {
+        Eigen::VectorXd& v = buffers ? buffers->*member : own;
+        if (v.size() < rows * cols) v.resize(rows * cols);  // grown, never shrunk
+        return Eigen::Map<Eigen::MatrixXd>(v.data(), rows, cols);
+    };
+    auto za = buffer(&PerturbationBuffers::za, own_a, nb * n, 2 * nm);
+    auto zb = buffer(&PerturbationBuffers::zb, own_b, nb * n, 2 * nm);
     gemm(za, q.qa.topLeftCorner(nb * n, n), Op::N, ph, Op::N);
     gemm(zb, q.qb.topLeftCorner(nb * n, n), Op::N, ph, Op::N);
 
@@ -111,7 +126,7 @@ inline void eigen_perturbation_blocks(const OrderContext& ctx, const BlockQ& q, 
     dshape.assign(nm, Eigen::MatrixXcd());
     if (wanted.empty()) return;
     const Index nw = static_cast<Index>(wanted.size());
-    Eigen::MatrixXd z4(nb * l, 2 * nm);
+    auto z4 = buffer(&PerturbationBuffers::z4, own_4, nb * l, 2 * nm);
     gemm(z4, q.q4.leftCols(n), Op::N, ph, Op::N);
     // G_i for every wanted mode in one complex GEMM: rows w l .. w l + l - 1 of
     // [C V diag(c_1); C V diag(c_2); ...] M (l-row products one by one run at a fraction of

@@ -11,6 +11,7 @@
 #include <complex>
 #include <functional>
 #include <limits>
+#include <stdexcept>
 #include <vector>
 
 #include "../modal.hpp"
@@ -177,6 +178,17 @@ struct BlockQ {
     BlockQ(Index n_blocks, Index n_max_, Index n_outputs, bool blocked_ = false)
         : nb(n_blocks), n_max(n_max_), l(n_outputs), blocked(blocked_), qa(nb * n_max, n_max),
           qb(nb * n_max, n_max), q4(nb * l, n_max) {}
+
+    /// Reuse this storage (blocked only) for n_blocks blocks at order n: a merge forms the Q
+    /// matrices of every order anew, and reusing one BlockQ made at the largest order spares the
+    /// allocation and first touch (page faults) of tens of MB per order. Rows beyond n_blocks n
+    /// and columns beyond n are left unused (the views keep the storage's row stride).
+    void reshape(Index n_blocks, Index n) {
+        if (!blocked || n_blocks * n > qa.rows() || n > qa.cols() || n_blocks * l > q4.rows())
+            throw std::logic_error("BlockQ::reshape: needs blocked storage made at least as large");
+        nb = n_blocks;
+        n_max = n;
+    }
 
     /// Block k's matrices (n_max x n_max, l x n_max) as strided views.
     ConstView qa_block(Index k) const { return view(qa, k, n_max); }
