@@ -55,15 +55,14 @@ def roving(n_setups: int, per_setup: int = 4) -> tuple:
     return tuple(out)
 
 
-def simulate(n_setups: int, n_samples: int, path: str, per_setup: int = 4) -> None:
-    import numpy as np
-
+def campaign(n_setups: int, n_samples: int, per_setup: int = 4, seed: int = 23):
+    """The benchmark's campaign: the simulated campaign and, per setup, its channel names (a DOF
+    roved again is renamed ``NAME@j``, j its setup)."""
     from modaluq.simulate.campaign import simulate_campaign
 
-    rov = roving(n_setups, per_setup)
-    camp = simulate_campaign(23, durations=(n_samples / 25.0,) * n_setups, roving=rov, references=REFERENCES)
-    seen = set()
-    arrays, names = {}, []
+    camp = simulate_campaign(seed, durations=(n_samples / 25.0,) * n_setups, roving=roving(n_setups, per_setup),
+                             references=REFERENCES)
+    seen, names = set(), []
     for j, s in enumerate(camp.setups):
         chans = []
         for c in s.channels:
@@ -71,9 +70,15 @@ def simulate(n_setups: int, n_samples: int, path: str, per_setup: int = 4) -> No
                 c = f"{c}@{j}"
             seen.add(c)
             chans.append(c)
-        arrays[f"y{j}"] = s.y
         names.append(chans)
-    np.savez(os.path.join(path, "campaign.npz"), **arrays)
+    return camp, names
+
+
+def simulate(n_setups: int, n_samples: int, path: str, per_setup: int = 4) -> None:
+    import numpy as np
+
+    camp, names = campaign(n_setups, n_samples, per_setup)
+    np.savez(os.path.join(path, "campaign.npz"), **{f"y{j}": s.y for j, s in enumerate(camp.setups)})
     with open(os.path.join(path, "meta.json"), "w") as fh:
         json.dump({"fs": camp.fs, "names": names, "frequency_hz": camp.frequency_hz.tolist()}, fh)
 

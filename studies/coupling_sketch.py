@@ -21,6 +21,8 @@ Usage: OPENBLAS_NUM_THREADS=1 python studies/coupling_sketch.py [N] [--setups S]
 from __future__ import annotations
 
 import argparse
+import os
+import sys
 import time
 import warnings
 
@@ -28,27 +30,18 @@ import numpy as np
 import pandas as pd
 
 import modaluq
-from modaluq.simulate.campaign import DECK_DOFS, simulate_campaign
 
-REFERENCES = ("L3", "R8")
-SETTINGS = dict(block_rows=50, past_block_rows=50, orders=list(range(2, 101, 2)), n_blocks=20)
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "bench"))
+import multisetup as bench_multisetup  # noqa: E402  (the benchmark's campaign and settings)
+
+REFERENCES = bench_multisetup.REFERENCES
+SETTINGS = bench_multisetup.SETTINGS
 
 
-def campaign(seed: int, n_setups: int, n_samples: int) -> list:
-    """One campaign as DataFrames, four roving channels per setup (renamed NAME@j when roved again)."""
-    free = [d for d in DECK_DOFS if d not in REFERENCES]
-    roving = tuple(tuple(free[(j * 4 + i) % len(free)] for i in range(4)) for j in range(n_setups))
-    camp = simulate_campaign(seed, durations=(n_samples / 25.0,) * n_setups, roving=roving, references=REFERENCES)
-    seen, frames = set(), []
-    for j, s in enumerate(camp.setups):
-        names = []
-        for c in s.channels:
-            if c not in REFERENCES and c in seen:
-                c = f"{c}@{j}"
-            seen.add(c)
-            names.append(c)
-        frames.append(pd.DataFrame(s.y, columns=names))
-    return frames, camp.fs
+def campaign(seed: int, n_setups: int, n_samples: int) -> tuple:
+    """One campaign of the benchmark's kind (bench/multisetup.py's) as DataFrames, and its rate."""
+    camp, names = bench_multisetup.campaign(n_setups, n_samples, seed=seed)
+    return [pd.DataFrame(s.y, columns=n) for s, n in zip(camp.setups, names)], camp.fs
 
 
 def merge(frames, fs, sketch):
