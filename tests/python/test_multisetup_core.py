@@ -153,6 +153,38 @@ def test_factor_rows_reproduce_the_covariance(case):
             assert np.linalg.norm(u[0]) == pytest.approx(m.frequency_std[i], rel=1e-12)
 
 
+def test_a_sketch_over_setups_with_few_and_many_blocks_equals_the_reference():
+    """coupling_sketch = 4 with setups of 3, 10 and 6 blocks: the 3-block setup keeps its blocks
+    (identity), the others are combined; core and reference agree, flags and σ included."""
+    camp = _campaign(False)
+    blocks = [3, 10, 6, 10, 10, 6]
+    setups = []
+    for s, nb in zip(camp.setups, blocks):
+        lay = _core.HankelLayout()
+        lay.block_rows = P
+        lay.past_block_rows = P
+        lay.references = list(s.references)
+        cov = _core.compute_covariances(np.ascontiguousarray(s.y).T, np.empty((0, s.y.shape[0])), lay, nb)
+        setups.append(_core.SetupData(cov, list(s.references), camp.fs))
+    ident = _core.identify_setups(setups, _options(camp.fs, coupling_sketch=4, noise_coupling_limit=3.0))
+    assert list(ident.setup_n_blocks) == blocks
+    ref, _ = om.identify_modular(
+        om.prepare_setups([(s.y, None) for s in camp.setups], P, P, blocks, [s.references for s in camp.setups]),
+        fs=camp.fs, p=P, orders=ORDERS, freeze_noise=True, coupling_sketch=4, noise_coupling_limit=3.0)
+    flagged = 0
+    for n in ORDERS:
+        r, m = ref[n], next(x for x in ident.modes if x.order == n)
+        nm = len(r["frequency_hz"])
+        if nm == 0:
+            continue
+        assert np.array_equal(np.asarray(m.noise_coupled), r["noise_coupled"]), n
+        flagged += int(np.sum(r["noise_coupled"]))
+        tol = TOL if n <= TRUE_ORDER else TOL_ABOVE_TRUE_ORDER
+        assert _rel_cols(m.noise_coupling[None], r["noise_coupling"][None]) < tol, n
+        assert _rel_cols(m.covariance, r["covariance"].reshape(nm, -1).T) < tol, n
+    assert flagged > 0
+
+
 def test_core_refuses_a_setup_without_the_references():
     camp = _campaign(False)
     setups = _core_setups(camp, False)
