@@ -24,6 +24,9 @@ void modaluq::python::bind_stabilization(py::module_& m) {
     py::enum_<ClusterStd>(m, "ClusterStd")
         .value("median", ClusterStd::median)
         .value("mean", ClusterStd::mean);
+    py::enum_<Representative>(m, "Representative")
+        .value("median", Representative::median)
+        .value("lowest", Representative::lowest);
     py::enum_<DropReason>(m, "DropReason")
         .value("too_few_poles", DropReason::too_few_poles)
         .value("frequency_std_above_bandwidth", DropReason::frequency_std_above_bandwidth)
@@ -62,6 +65,7 @@ void modaluq::python::bind_stabilization(py::module_& m) {
         .def_readwrite("block_too_short", &Poles::block_too_short)
         .def_readwrite("frequency_damping_factor", &Poles::frequency_damping_factor)
         .def_readwrite("orders", &Poles::orders)
+        .def_readwrite("noise_floor_order", &Poles::noise_floor_order)
         .def_readwrite("has_uncertainty", &Poles::has_uncertainty)
         .def("validate", &Poles::validate);
     m.def("poles_of", &poles_of, py::arg("identification"));
@@ -100,6 +104,7 @@ void modaluq::python::bind_stabilization(py::module_& m) {
         .def_readwrite("statuses", &ClusteringOptions::statuses)
         .def_readwrite("linkage", &ClusteringOptions::linkage)
         .def_readwrite("cluster_std", &ClusteringOptions::cluster_std)
+        .def_readwrite("representative", &ClusteringOptions::representative)
         .def("validate", &ClusteringOptions::validate);
 
     py::class_<SelectedModes>(m, "SelectedModes")

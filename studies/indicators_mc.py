@@ -4,7 +4,12 @@ records of the paper's chain, output-only and input/output, at the true order (1
 engineer's call (`identify(y, u, fs, frequency_range=(1, 20)).select_modes()`). For each true mode:
 the std of the indicator across records against the median reported σ, and for the two-record
 MAC how often the "same mode" test (`modaluq.indicators.mac_test`) rejects at 5 % (should be ~5 %).
-Usage: python studies/indicators_mc.py [N] [seconds]   (default 200 records of 400 s: ~6 min)
+In the engineer's call the selected mode's shape is its cluster's representative pole's
+(`ClusteringSettings.representative`, "median" by default; "lowest" reads it at the lowest order at
+or above the noise floor); the table also gives the coverage of f ± 1.96 σ_f and ξ ± 1.96 σ_ξ of the
+mode around the records' mean.
+Usage: python studies/indicators_mc.py [N] [seconds] [representative]
+       (default 200 records of 400 s, "median": ~6 min)
 """
 import sys
 import warnings
@@ -18,25 +23,28 @@ FS = 50.0
 TRUE_ORDER = 12
 
 
-def _estimates(sim, with_input, call):
-    """(frequency, shape, shape covariance) of each identified mode of one record."""
+def _estimates(sim, with_input, call, representative):
+    """(frequency, shape, shape covariance, [f, σ_f, ξ, σ_ξ] rows) of each identified mode of one record."""
     u = sim.u if with_input else None
     if call == "true order":
         m = modaluq.identify(sim.y, u, fs=FS, block_rows=20, orders=[TRUE_ORDER]).modes[0]
-        return m.frequency_hz, m.mode_shape, [shape_covariance(c) for c in m.covariance]
-    sel = modaluq.identify(sim.y, u, fs=FS, frequency_range=(1, 20)).select_modes()
-    return sel.frequency_hz, sel.mode_shape, [shape_covariance(c) for c in sel.mode_covariance]
+        fx = np.column_stack([m.frequency_hz, m.frequency_std, m.damping_ratio, m.damping_std])
+        return m.frequency_hz, m.mode_shape, [shape_covariance(c) for c in m.covariance], fx
+    result = modaluq.identify(sim.y, u, fs=FS, frequency_range=(1, 20))
+    sel = result.stabilization_diagram().select_modes(representative=representative)
+    fx = np.column_stack([sel.frequency_hz, sel.frequency_std, sel.damping_ratio, sel.damping_std])
+    return sel.frequency_hz, sel.mode_shape, [shape_covariance(c) for c in sel.mode_covariance], fx
 
 
-def main(n_records=200, duration=400.0):
-    """Print one table per configuration; return {config: (records, modes, 8) array} of MPC, σ,
-    MAC with the truth, σ, MAC with the paired record, σ, p-value, found."""
+def main(n_records=200, duration=400.0, representative="median"):
+    """Print one table per configuration; return {config: (records, modes, 12) array} of MPC, σ,
+    MAC with the truth, σ, MAC with the paired record, σ, p-value, found, f, σ_f, ξ, σ_ξ."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        return _run(n_records, duration)
+        return _run(n_records, duration, representative)
 
 
-def _run(n_records, duration):
+def _run(n_records, duration, representative):
     out = {}
     for with_input in (False, True):
         for call in ("true order", "engineer's call"):
@@ -45,8 +53,8 @@ def _run(n_records, duration):
                 sim = modaluq.simulate(int(duration * FS), seed=5000 + seed)
                 order = np.argsort(sim.frequency_hz)
                 truth_f, truth_shape = sim.frequency_hz[order], sim.mode_shape[:, order]
-                f, phi, cov = _estimates(sim, with_input, call)
-                row = np.full((len(truth_f), 8), np.nan)
+                f, phi, cov, fx = _estimates(sim, with_input, call, representative)
+                row = np.full((len(truth_f), 12), np.nan)
                 found = [None] * len(truth_f)
                 for k, f0 in enumerate(truth_f):
                     j = np.flatnonzero(np.abs(f / f0 - 1) < 0.02)
@@ -57,6 +65,7 @@ def _run(n_records, duration):
                     mac = mac_test(phi[:, j], truth_shape[:, k], cov[j], None)
                     row[k, :4] = mpc.value, mpc.std, mac.mac, mac.std
                     row[k, 7] = 1
+                    row[k, 8:] = fx[j]
                     found[k] = (phi[:, j], cov[j])
                 if seed % 2 == 1:  # pair with the previous record
                     for k in range(len(truth_f)):
@@ -67,6 +76,8 @@ def _run(n_records, duration):
                 shapes.append(found)
             a = np.array(rows)
             name = f"{'input/output' if with_input else 'output-only'}, {call}"
+            if call != "true order":
+                name += f" (representative {representative!r})"
             out[name] = a
             _table(name, a, truth_f, n_records, duration)
     return out
@@ -80,11 +91,19 @@ def _ratio(values, sigmas):
     return mc, np.median(sigmas[ok]), np.median(sigmas[ok]) / mc
 
 
+def _coverage(values, sigmas):
+    """Share of the records whose value ± 1.96 σ holds the records' mean."""
+    ok = np.isfinite(values) & np.isfinite(sigmas)
+    if ok.sum() < 3:
+        return np.nan
+    return float(np.mean(np.abs(values[ok] - values[ok].mean()) <= 1.96 * sigmas[ok]))
+
+
 def _table(name, a, truth_f, n_records, duration):
     print(f"\n{name}: {n_records} records of {duration:g} s (paired: {n_records // 2})")
     print("| mode | f (Hz) | found | std MPC (MC) | median σ | ratio | std MAC vs truth (MC) | median σ | ratio "
-          "| std MAC pair (MC) | median σ | ratio | same-mode rejected at 5 % |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+          "| std MAC pair (MC) | median σ | ratio | same-mode rejected at 5 % | f: ratio, coverage | ξ: ratio, coverage |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     for k, f0 in enumerate(truth_f):
         cells = []
         for v, s in ((0, 1), (2, 3), (4, 5)):
@@ -92,8 +111,12 @@ def _table(name, a, truth_f, n_records, duration):
             cells += [f"{mc:.2e}", f"{med:.2e}", f"{r:.2f}"]
         p = a[:, k, 6][np.isfinite(a[:, k, 6])]
         rej = f"{np.mean(p < 0.05) * 100:.1f} % of {p.size}" if p.size else "-"
-        print(f"| {k + 1} | {f0:.3f} | {int(np.nansum(a[:, k, 7]))}/{n_records} | " + " | ".join(cells) + f" | {rej} |")
+        fx = [f"{_ratio(a[:, k, v], a[:, k, v + 1])[2]:.2f}, {_coverage(a[:, k, v], a[:, k, v + 1]) * 100:.0f} %"
+              for v in (8, 10)]
+        print(f"| {k + 1} | {f0:.3f} | {int(np.nansum(a[:, k, 7]))}/{n_records} | " + " | ".join(cells)
+              + f" | {rej} | " + " | ".join(fx) + " |")
 
 
 if __name__ == "__main__":
-    main(int(sys.argv[1]) if len(sys.argv) > 1 else 200, float(sys.argv[2]) if len(sys.argv) > 2 else 400.0)
+    main(int(sys.argv[1]) if len(sys.argv) > 1 else 200, float(sys.argv[2]) if len(sys.argv) > 2 else 400.0,
+         sys.argv[3] if len(sys.argv) > 3 else "median")

@@ -86,8 +86,9 @@ COLUMNS = ("group", "record", "n_windows", "window", "t0_s", "t1_s", "half_s", "
            "z_f", "z_xi", "z_f_cap", "mac", "harmonic", "rms_ratio")
 
 
-def pairs_of_record(name, data, levels=LEVELS, tolerance=0.02):
-    """Every mode pair of every window of one record (dicts with :data:`COLUMNS`), and the failed windows."""
+def pairs_of_record(name, data, levels=LEVELS, tolerance=0.02, representative="median"):
+    """Every mode pair of every window of one record (dicts with :data:`COLUMNS`), and the failed
+    windows; ``representative`` is ``ClusteringSettings.representative``."""
     group, read, band = RECORDS[name]
     y, fs = read(data)
     T = y.shape[0] / fs
@@ -95,7 +96,8 @@ def pairs_of_record(name, data, levels=LEVELS, tolerance=0.02):
     for n in levels:
         for k in range(n):
             t0, t1 = k * T / n, (k + 1) * T / n
-            a = Analysis.from_arrays(y, fs=fs, settings=modaluq.Settings(frequency_range=band, start=t0, stop=t1))
+            a = Analysis.from_arrays(y, fs=fs, settings=modaluq.Settings(frequency_range=band, start=t0, stop=t1),
+                                     clustering=modaluq.ClusteringSettings(representative=representative))
             try:
                 check = split_halves(a, max_frequency_difference=tolerance)
             except ValueError as exc:
@@ -182,7 +184,8 @@ def print_tables(rows, failed, levels=LEVELS):
               f"{'yes' if r['harmonic'] else 'no'} | {r['rms_ratio']:.2f} |")
 
 
-def main(data_dir="../shared/data", out=None, records=tuple(RECORDS), levels=LEVELS, tolerance=0.02):
+def main(data_dir="../shared/data", out=None, records=tuple(RECORDS), levels=LEVELS, tolerance=0.02,
+         representative="median"):
     """Run every record of ``records`` at every level of ``levels``, print the tables, write the
     pairs to ``out`` (CSV) if given; returns (rows, failed)."""
     data = Path(data_dir)
@@ -193,7 +196,7 @@ def main(data_dir="../shared/data", out=None, records=tuple(RECORDS), levels=LEV
         t = time.perf_counter()
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            r, f = pairs_of_record(name, data, levels, tolerance)
+            r, f = pairs_of_record(name, data, levels, tolerance, representative)
         rows += r
         failed += f
         print(f"{name}: {len(r)} pairs, {len(f)} failed windows, {time.perf_counter() - t:.1f} s", file=sys.stderr)
@@ -212,5 +215,8 @@ if __name__ == "__main__":
     p.add_argument("--out", default=None, help="CSV of every pair")
     p.add_argument("--levels", type=int, nargs="+", default=list(LEVELS), help="numbers of windows (default 1 2 4 8)")
     p.add_argument("--tolerance", type=float, default=0.02, help="pairing: largest relative frequency difference")
+    p.add_argument("--representative", choices=("median", "lowest"), default="median",
+                   help="ClusteringSettings.representative of every analysis")
     args = p.parse_args()
-    main(args.data_dir, args.out, levels=tuple(args.levels), tolerance=args.tolerance)
+    main(args.data_dir, args.out, levels=tuple(args.levels), tolerance=args.tolerance,
+         representative=args.representative)

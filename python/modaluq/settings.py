@@ -89,6 +89,7 @@ _CODECS = {
     # None (Python's default: the identification's own, resolved by select_modes) crosses as the
     # core's default, one record's "median"
     "cluster_std": _Codec(lambda v: v.name, lambda v: getattr(_core.ClusterStd, v or "median")),
+    "representative": _Codec(lambda v: v.name, lambda v: getattr(_core.Representative, v)),
 }
 
 
@@ -451,6 +452,20 @@ class ClusteringSettings:
         decorrelate across orders: the median was 1.04–1.4× the scatter of the selected value,
         issue 23) and ``"median"`` for one record (the core's default). The cluster tests
         (``max_frequency_std_per_bandwidth``, ``merge_fragments``) use the poles' own σ either way.
+    representative : {"median", "lowest"}
+        Which member of a cluster is the mode. ``"median"`` (default): the reliable member nearest
+        to the cluster's median (f, ξ), measured in their median σ; its f, ξ and shape are
+        reported with the cluster's σ of f and ξ (``cluster_std``) and its own shape covariance.
+        ``"lowest"``: the reliable member at the lowest order n ≥ max(k*, 2m), with k* the noise
+        floor (``Result.significant_singular_values``) and m the number of selected modes (two
+        states each; below that the model cuts signal and the pole is biased), or the highest
+        reliable member when none is that high; the mode is then that pole, σ and covariance
+        included (``cluster_std`` is not used): one order's identification, read where its
+        first-order σ is calibrated. Above it the noise directions make a shape's σ too small and
+        a weakly excited mode's shape can mix with a spurious pole, which the MPC, the MAC and
+        their σ read (docs/shapes.md §6: on the paper's chain, 200 records, the σ of MPC and MAC
+        of modes 2–4 and 6 input/output and 2–3 output-only go from 0.01–0.83 of their scatter
+        to 0.96–1.26).
     """
 
     distance_threshold: float = _CLUSTERING["distance_threshold"]
@@ -469,6 +484,7 @@ class ClusteringSettings:
     linkage: str = _CLUSTERING["linkage"]
     #: None: the identification's own (``"mean"`` for a multi-setup merge, else the core's ``"median"``)
     cluster_std: str | None = None
+    representative: str = _CLUSTERING["representative"]
 
     def __post_init__(self):
         check_real("distance_threshold", self.distance_threshold, low=0, low_open=True)
@@ -499,6 +515,10 @@ class ClusteringSettings:
             raise TypeError(f"cluster_std must be None, 'median' or 'mean'; got {type(self.cluster_std).__name__}")
         if self.cluster_std not in (None, "median", "mean"):
             raise ValueError(f"cluster_std must be None, 'median' or 'mean'; got {self.cluster_std!r}")
+        if not isinstance(self.representative, str):
+            raise TypeError(f"representative must be 'median' or 'lowest'; got {type(self.representative).__name__}")
+        if self.representative not in ("median", "lowest"):
+            raise ValueError(f"representative must be 'median' or 'lowest'; got {self.representative!r}")
 
     def to_dict(self) -> dict:
         return {f.name: _exported(getattr(self, f.name)) for f in fields(self)}

@@ -129,6 +129,10 @@ class Diagram:
     #: the identification's ``Result.low_signal_to_noise``: H is at the level of its own estimation
     #: noise, the modes cannot be told from noise (the tables of the selected modes say so)
     low_signal_to_noise: bool = False
+    #: k*, the significant singular values of H (``Result.significant_singular_values``): poles at
+    #: lower orders come from a model that cuts signal (``ClusteringSettings.representative``
+    #: ``"lowest"`` reads its modes from this order up); 0: unknown
+    noise_floor_order: int = 0
     #: (n_poles,) modal phase collinearity of each pole's shape (1: real) and its mean phase
     #: deviation, degrees (:mod:`modaluq.indicators`; ``StabilityCriteria.min_mpc``/``max_mpd_deg``
     #: can reject poles by them); empty when unknown (a Diagram constructed by hand)
@@ -323,6 +327,7 @@ def stabilization_diagram(result, criteria: StabilityCriteria | None = None, *,
         frequency_damping_factor=_factor_per_pole(p.frequency_damping_factor, n_poles),
         n_samples=int(getattr(result, "n_samples", 0)),
         low_signal_to_noise=bool(getattr(result, "low_signal_to_noise", False)),
+        noise_floor_order=int(p.noise_floor_order),
     )
     object.__setattr__(diagram, "_core_diagram", d)
     object.__setattr__(diagram, "_modes", tuple(result.modes))
@@ -366,6 +371,7 @@ def _poles_of_modes(result, has_std: bool):
     p.close_singular_values = per_pole([np.full(m.n_modes, m.close_singular_values) for m in modes], bool)
     p.noise_coupled = per_pole([np.zeros(m.n_modes, bool) if m.noise_coupled is None else m.noise_coupled
                                 for m in modes], bool)
+    p.noise_floor_order = int(getattr(result, "significant_singular_values", 0) or 0)
     # as poles_of: NaN / False without uncertainty; empty when unknown (a Result made without them)
     rho = [getattr(m, "frequency_damping_correlation", None) for m in modes]
     slow = [getattr(m, "block_too_short", None) for m in modes]

@@ -124,6 +124,57 @@ TEST_CASE("selection: clusters, one pole per order, minimum size, representative
                          modaluq::invalid_argument);
 }
 
+TEST_CASE("selection: the lowest representative is the lowest reliable member at or above max(k*, 2 m)") {
+    // A mode at orders 4..40 whose frequency drifts with the order (the median member sits at
+    // order 22); order 12's pole is noise-coupled, order 14 cuts close singular values.
+    std::map<Index, std::vector<P>> by_order;
+    for (Index n = 4; n <= 40; n += 2) {
+        P p{10.0 + 1e-4 * double(n), 0.02, 0, 0.01 + 1e-4 * double(n)};
+        p.coupled = n == 12;
+        by_order[n] = {p};
+    }
+    modaluq::Diagram d = all_stable(by_order);
+    for (Index i = 0; i < d.poles.size(); ++i) d.poles.close_singular_values(i) = d.poles.order(i) == 14;
+    modaluq::ClusteringOptions o;
+    const auto median = modaluq::select_modes(d, o);
+    REQUIRE(median.n_modes() == 1);
+    CHECK(median.representative_order(0) == 22);  // nearest to the median frequency (orders 4..40)
+    o.representative = modaluq::Representative::lowest;
+    auto lowest_at = [&](const modaluq::Diagram& diagram, Index floor) {
+        modaluq::Diagram with_floor = diagram;
+        with_floor.poles.noise_floor_order = floor;
+        const auto s = modaluq::select_modes(with_floor, o);
+        const auto m = modaluq::select_modes(with_floor);
+        REQUIRE(s.n_modes() == m.n_modes());
+        for (Index k = 0; k < s.n_modes(); ++k) {
+            // one pole, sigma included; the clusters are those of the default
+            const Index rep = s.representative_pole(k);
+            CHECK(s.frequency_hz(k) == with_floor.poles.frequency_hz(rep));
+            CHECK(s.frequency_std(k) == with_floor.poles.frequency_std(rep));
+            CHECK(s.damping_std(k) == with_floor.poles.damping_std(rep));
+            CHECK(s.mode_shape_std_real.col(k) == with_floor.poles.mode_shape_std_real.col(rep));
+            CHECK(s.members == m.members);
+        }
+        return s.representative_order(0);
+    };
+    CHECK(lowest_at(d, 0) == 4);    // unknown floor, one mode (2 m = 2): the lowest reliable member
+    CHECK(lowest_at(d, 10) == 10);
+    CHECK(lowest_at(d, 11) == 16);  // 12 is noise-coupled, 14 at a close cut: neither is read
+    CHECK(lowest_at(d, 40) == 40);
+    CHECK(lowest_at(d, 60) == 40);  // no member that high: the highest, the least cut
+    // three modes need order 6 at least, whatever k* says
+    for (Index n = 4; n <= 40; n += 2) {
+        by_order[n].push_back({20.0, 0.02, 1});
+        by_order[n].push_back({30.0, 0.02, 2});
+    }
+    modaluq::Diagram three = all_stable(by_order);
+    for (Index i = 0; i < three.poles.size(); ++i) three.poles.close_singular_values(i) = three.poles.order(i) == 14;
+    CHECK(lowest_at(three, 0) == 6);
+    CHECK(lowest_at(three, 4) == 6);
+    CHECK(lowest_at(three, 8) == 8);
+    CHECK(std::string(modaluq::to_string(modaluq::Representative::lowest)) == "lowest");
+}
+
 TEST_CASE("selection: a cluster whose frequency is less certain than its peak's bandwidth is dropped") {
     // Two stable columns over 10 orders: a 2 %-damped mode with sigma_f = 0.1 % of f
     // (sigma_f / (f xi) = 0.05) and a 0.5 %-damped column with sigma_f = 1 % of f (ratio 2).

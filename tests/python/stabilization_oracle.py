@@ -198,7 +198,7 @@ def stabilization_diagram_reference(result, criteria: StabilityCriteria | None =
         frequency_change=df, damping_change=dxi, mac=mac, frequency_change_std=dz,
         close_singular_values=close, noise_coupled=coupled, orders=orders, fs=float(result.fs), output_names=names,
         criteria=c, has_uncertainty=has_std, result_settings=dict(result.settings),
-        frequency_damping_factor=factor,
+        frequency_damping_factor=factor, noise_floor_order=int(getattr(result, "significant_singular_values", 0)),
     )
 
 
@@ -395,7 +395,15 @@ def select_modes_reference(diagram: Diagram, settings: ClusteringSettings | None
         sc_xi = scale(diagram.damping_std, xi_spread[k])
         dist = ((f[candidates] - med) / sc_f) ** 2 + ((xi[candidates] - np.median(xi[members])) / sc_xi) ** 2
         rep[k] = candidates[np.flatnonzero(dist == dist.min())[-1]]  # ties -> the higher order
-        if reliable.size and cluster_std == "mean" and factor.shape[0] == diagram.n_poles:
+        lowest = settings.representative == "lowest"
+        if lowest:  # the lowest order >= max(k*, 2 m), else the highest; that pole's own sigma
+            above = candidates[order[candidates] >= max(diagram.noise_floor_order, 2 * n_modes)]
+            rep[k] = above.min() if above.size else candidates.max()
+        if lowest:
+            sf_med[k], sxi_med[k] = diagram.frequency_std[rep[k]], diagram.damping_std[rep[k]]
+            if diagram.frequency_damping_correlation.size == diagram.n_poles:
+                rho[k] = diagram.frequency_damping_correlation[rep[k]]
+        elif reliable.size and cluster_std == "mean" and factor.shape[0] == diagram.n_poles:
             # the sigma of the reliable poles' mean: its factor rows are the mean of theirs
             u = factor[reliable].mean(axis=0)
             sf_med[k], sxi_med[k] = np.linalg.norm(u[0]), np.linalg.norm(u[1])

@@ -117,6 +117,7 @@ def test_diagram_is_the_cores_and_a_result_without_it_gives_the_same_numbers():
         copies = [dataclasses.replace(result), pickle.loads(pickle.dumps(result))]
         assert all(c.core_identification is None for c in copies)
         diagram = result.stabilization_diagram()
+        assert diagram.noise_floor_order == result.significant_singular_values
         for copy in copies:
             other = copy.stabilization_diagram()
             for name in [f.name for f in dataclasses.fields(Diagram) if f.init]:
@@ -442,6 +443,36 @@ def test_chain_selection_reports_consistent_members_and_spread(chain_selection):
         assert sel.frequency_std[k] == np.median(diagram.frequency_std[reliable])
         assert sel.damping_std[k] == np.median(diagram.damping_std[reliable])
         np.testing.assert_array_equal(sel.mode_shape[:, k], diagram.mode_shape[:, i])
+
+
+def test_chain_lowest_representative_is_one_pole_read_at_the_lowest_sufficient_order(chain_selection):
+    """representative="lowest": the same clusters; each mode is its reliable member at the lowest
+    order >= max(k*, 2 m), with that pole's own σ and covariance; the noise floor is the result's."""
+    sim, diagram, sel = chain_selection
+    low = diagram.select_modes(representative="lowest")
+    assert [list(m) for m in low.members] == [list(m) for m in sel.members]
+    assert diagram.noise_floor_order > 0  # the identification's k* (Result.significant_singular_values)
+    floor = max(diagram.noise_floor_order, 2 * low.n_modes)
+    for k, members in enumerate(low.members):
+        reliable = members[~(diagram.close_singular_values[members] | diagram.noise_coupled[members])]
+        above = reliable[diagram.order[reliable] >= floor]
+        i = above[np.argmin(diagram.order[above])] if above.size else reliable[np.argmax(diagram.order[reliable])]
+        assert low.representative_pole[k] == i
+        assert (low.frequency_hz[k], low.frequency_std[k], low.damping_std[k]) == (
+            diagram.frequency_hz[i], diagram.frequency_std[i], diagram.damping_std[i])
+        np.testing.assert_array_equal(low.mode_covariance[k], diagram.pole_covariance(int(i)))
+    # read near the floor, not at the median member's order
+    assert np.median(low.representative_order) < np.median(sel.representative_order)
+    z = np.abs(low.frequency_hz - sim.frequency_hz) / low.frequency_std
+    assert np.all(z <= 3.0), z
+
+
+def test_representative_must_be_median_or_lowest(chain_selection):
+    _, diagram, _ = chain_selection
+    with pytest.raises(ValueError, match="representative"):
+        diagram.select_modes(representative="highest")
+    with pytest.raises(TypeError, match="representative"):
+        diagram.select_modes(representative=1)
 
 
 def test_chain_rejected_and_unstable_poles_keep_their_reason(chain_selection):

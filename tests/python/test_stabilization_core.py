@@ -41,7 +41,8 @@ CLUSTERING = [{}, {"linkage": "single"}, {"linkage": "complete", "distance_thres
               {"linkage": "weighted", "min_cluster_size": 2},
               {"statuses": ("stable", "stable_frequency"), "min_cluster_fraction": 0.5},
               {"per_cluster_min_size": True, "max_frequency_std_per_bandwidth": 0.3},
-              {"max_frequency_std_per_bandwidth": None}, {"cluster_std": "mean"}, {"cluster_std": "median"}]
+              {"max_frequency_std_per_bandwidth": None}, {"cluster_std": "mean"}, {"cluster_std": "median"},
+              {"representative": "lowest"}, {"representative": "lowest", "cluster_std": "mean"}]
 
 
 @pytest.fixture(scope="module")

@@ -79,9 +79,10 @@ def test_selected_sigma_mc(capsys):
 
 @pytest.mark.slow
 def test_indicators_mc(capsys):
-    out = _module("indicators_mc").main(n_records=2, duration=60.0)
-    assert len(out) == 4 and all(a.shape == (2, 6, 8) for a in out.values())
-    assert "same-mode rejected at 5 %" in capsys.readouterr().out
+    out = _module("indicators_mc").main(n_records=2, duration=60.0, representative="lowest")
+    assert len(out) == 4 and all(a.shape == (2, 6, 12) for a in out.values())
+    text = capsys.readouterr().out
+    assert "same-mode rejected at 5 %" in text and "engineer's call (representative 'lowest')" in text
 
 
 def test_automac_mc(capsys):

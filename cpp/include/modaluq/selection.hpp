@@ -41,6 +41,28 @@ inline const char* to_string(ClusterStd c) {
     return "?";
 }
 
+/// Which member of a cluster select_modes reports (ClusteringOptions::representative): its
+/// frequency, damping ratio and shape (and, in Python, its covariance).
+enum class Representative : int {
+    /// the candidate nearest to the cluster's median (f, xi), each in its median sigma
+    median = 0,
+    /// the candidate at the lowest order n >= max(k*, 2 m), k* the noise floor
+    /// (Poles::noise_floor_order) and m the number of selected modes (two states each): below
+    /// that the model cuts signal and the pole is biased. The highest candidate when none is that
+    /// high. The mode is then that pole, sigma included (ClusterStd is not used): at that order
+    /// the first-order sigma is calibrated, while higher orders' noise directions make the
+    /// shapes' sigma too small and lightly excited modes mix with spurious poles (docs/shapes.md §6)
+    lowest = 1,
+};
+
+inline const char* to_string(Representative r) {
+    switch (r) {
+        case Representative::median: return "median";
+        case Representative::lowest: return "lowest";
+    }
+    return "?";
+}
+
 /// How select_modes groups poles into modes.
 struct ClusteringOptions {
     /// Cut height on d_ij = |f_i - f_j| / max(f_i, f_j) + (1 - MAC_ij) (e.g. 1 % in frequency
@@ -78,6 +100,7 @@ struct ClusteringOptions {
     double fragment_max_shared = 0.25;
     std::vector<PoleStatus> statuses{PoleStatus::stable};  ///< which poles are clustered
     Linkage linkage = Linkage::average;  ///< see detail/linkage.hpp
+    Representative representative = Representative::median;  ///< see Representative
     /// The sigma of f and xi reported per mode (SelectedModes::frequency_std, damping_std,
     /// frequency_damping_correlation); the clusters, the representative and its value, and the
     /// tests on the poles' own sigma (max_frequency_std_per_bandwidth, merge_fragments) do not
@@ -488,6 +511,9 @@ inline SelectedModes select_modes(const Diagram& diagram, const ClusteringOption
     std::sort(dropped.begin(), dropped.end());
 
     const Index l = P.mode_shape.rows(), nm = Index(kept.size());
+    // Representative::lowest reads each mode at the lowest order that can hold every selected
+    // mode (two states each) and is not below the noise floor k*
+    const Index lowest_floor = std::max(P.noise_floor_order, 2 * nm);
     SelectedModes s;
     s.min_cluster_size = smallest_min_size;
     if (check_bandwidth) s.max_frequency_std_per_bandwidth = *options.max_frequency_std_per_bandwidth;
@@ -556,11 +582,21 @@ inline SelectedModes select_modes(const Diagram& diagram, const ClusteringOption
             return a * a + b * b;
         };
         Index rep = candidates[0];
-        for (Index i : candidates)  // ascending order: "<=" hands ties to the higher order
-            if (distance(i) <= distance(rep)) rep = i;
-        s.frequency_std(k) = sf.empty() ? P.frequency_std(rep) : detail::median(sf);
-        s.damping_std(k) = sxi.empty() ? P.damping_std(rep) : detail::median(sxi);
-        const bool of_mean = options.cluster_std == ClusterStd::mean && !with_sigma.empty() &&
+        const bool lowest = options.representative == Representative::lowest;
+        if (lowest) {
+            // candidates ascend in order (one pole per order): the first at or above the floor,
+            // else the nearest below it
+            const auto above = std::find_if(candidates.begin(), candidates.end(),
+                                            [&](Index i) { return P.order(i) >= lowest_floor; });
+            rep = above != candidates.end() ? *above : candidates.back();
+        } else {
+            for (Index i : candidates)  // ascending order: "<=" hands ties to the higher order
+                if (distance(i) <= distance(rep)) rep = i;
+        }
+        // "lowest" reports one order's identification, sigma included; "median" the cluster's sigma
+        s.frequency_std(k) = sf.empty() || lowest ? P.frequency_std(rep) : detail::median(sf);
+        s.damping_std(k) = sxi.empty() || lowest ? P.damping_std(rep) : detail::median(sxi);
+        const bool of_mean = !lowest && options.cluster_std == ClusterStd::mean && !with_sigma.empty() &&
                              P.frequency_damping_factor.cols() == n && P.frequency_damping_factor.rows() > 0;
         if (of_mean) {
             // The mean of the members' estimates has the mean of their factor rows (docs/uq-math.md §13.10).

@@ -128,6 +128,9 @@ struct Poles {
     /// (0 columns: unknown; the selection's ClusterStd::mean then falls back to the median).
     Eigen::MatrixXd frequency_damping_factor;
     std::vector<Index> orders;           ///< identified orders, ascending (an order may hold no pole)
+    /// k*, the significant singular values of H (Identification::significant_singular_values):
+    /// a pole at a lower order comes from a model that cuts signal, and is biased. 0: unknown.
+    Index noise_floor_order = 0;
     bool has_uncertainty = true;         ///< the std fields are estimates (false: all NaN)
 
     Index size() const { return frequency_hz.size(); }
@@ -170,6 +173,7 @@ inline Poles poles_of(const Identification& id) {
     const double nan = std::numeric_limits<double>::quiet_NaN();
     Poles p;
     p.has_uncertainty = true;
+    p.noise_floor_order = id.significant_singular_values;
     // the factor rows when every order with modes has them, all with one n_b (else none)
     Index factor_rows = 0;
     bool factor_known = true;

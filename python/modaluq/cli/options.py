@@ -23,7 +23,7 @@ SETTINGS_OPTIONS = ("frequency_range", "start", "stop", "decimate", "detrend", "
                     "past_block_rows", "n_blocks", "bootstrap_draws")
 CRITERIA_OPTIONS = ("max_frequency_change", "max_damping_change", "min_mac", "damping_std_factor", "match_window",
                     "frequency_std_factor", "max_frequency_cov", "max_damping_ratio")
-CLUSTERING_OPTIONS = ("distance_threshold", "min_cluster_size")
+CLUSTERING_OPTIONS = ("distance_threshold", "min_cluster_size", "representative")
 #: Options whose 0 switches their test off (the field's None).
 OFF_AT_ZERO = ("frequency_std_factor", "max_frequency_cov", "damping_std_factor")
 
@@ -106,6 +106,10 @@ def add_analysis_options(p: argparse.ArgumentParser) -> None:
     automatic = f"{_shown(k.min_cluster_fraction)} of the orders, at least 3"
     g.add_argument("--min-cluster-size", type=integer_option(1), default=None, metavar="N",
                    help=f"poles a mode needs (default: {k.min_cluster_size or automatic})")
+    g.add_argument("--representative", choices=("median", "lowest"), default=None,
+                   help="the pole of each mode's cluster whose f, damping and shape are reported: nearest to "
+                        "the cluster's median f and damping, or at the lowest order at or above the noise "
+                        f"floor, whose shape sigma is calibrated (default {k.representative})")
 
 
 def _given(args, names) -> dict:
