@@ -8,8 +8,11 @@ In the engineer's call the selected mode's shape is its cluster's representative
 (`ClusteringSettings.representative`, "median" by default; "lowest" reads it at the lowest order at
 or above the noise floor); the table also gives the coverage of f ± 1.96 σ_f and ξ ± 1.96 σ_ξ of the
 mode around the records' mean.
-Usage: python studies/indicators_mc.py [N] [seconds] [representative]
-       (default 200 records of 400 s, "median": ~6 min)
+A fourth argument picks the structure: "chain" (the paper's, default) or "frame" (a 4-storey
+chain driven at its first and last floors by two measured inputs, modaluq.simulate(n_dof=4,
+input_dofs=(0, 3)), true order 8).
+Usage: python studies/indicators_mc.py [N] [seconds] [representative] [structure]
+       (default 200 records of 400 s, "median", "chain": ~6 min)
 """
 import sys
 import warnings
@@ -20,14 +23,15 @@ import modaluq
 from modaluq.indicators import mac_test, modal_phase_collinearity, shape_covariance
 
 FS = 50.0
-TRUE_ORDER = 12
+#: structure: (modaluq.simulate keywords, true order)
+STRUCTURES = {"chain": ({}, 12), "frame": (dict(n_dof=4, input_dofs=(0, 3)), 8)}
 
 
-def _estimates(sim, with_input, call, representative):
+def _estimates(sim, with_input, call, representative, true_order):
     """(frequency, shape, shape covariance, [f, σ_f, ξ, σ_ξ] rows) of each identified mode of one record."""
     u = sim.u if with_input else None
     if call == "true order":
-        m = modaluq.identify(sim.y, u, fs=FS, block_rows=20, orders=[TRUE_ORDER]).modes[0]
+        m = modaluq.identify(sim.y, u, fs=FS, block_rows=20, orders=[true_order]).modes[0]
         fx = np.column_stack([m.frequency_hz, m.frequency_std, m.damping_ratio, m.damping_std])
         return m.frequency_hz, m.mode_shape, [shape_covariance(c) for c in m.covariance], fx
     result = modaluq.identify(sim.y, u, fs=FS, frequency_range=(1, 20))
@@ -36,24 +40,25 @@ def _estimates(sim, with_input, call, representative):
     return sel.frequency_hz, sel.mode_shape, [shape_covariance(c) for c in sel.mode_covariance], fx
 
 
-def main(n_records=200, duration=400.0, representative="median"):
+def main(n_records=200, duration=400.0, representative="median", structure="chain"):
     """Print one table per configuration; return {config: (records, modes, 12) array} of MPC, σ,
     MAC with the truth, σ, MAC with the paired record, σ, p-value, found, f, σ_f, ξ, σ_ξ."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        return _run(n_records, duration, representative)
+        return _run(n_records, duration, representative, structure)
 
 
-def _run(n_records, duration, representative):
+def _run(n_records, duration, representative, structure):
+    keywords, true_order = STRUCTURES[structure]
     out = {}
     for with_input in (False, True):
         for call in ("true order", "engineer's call"):
             rows, shapes = [], []
             for seed in range(n_records):
-                sim = modaluq.simulate(int(duration * FS), seed=5000 + seed)
+                sim = modaluq.simulate(int(duration * FS), seed=5000 + seed, **keywords)
                 order = np.argsort(sim.frequency_hz)
                 truth_f, truth_shape = sim.frequency_hz[order], sim.mode_shape[:, order]
-                f, phi, cov, fx = _estimates(sim, with_input, call, representative)
+                f, phi, cov, fx = _estimates(sim, with_input, call, representative, true_order)
                 row = np.full((len(truth_f), 12), np.nan)
                 found = [None] * len(truth_f)
                 for k, f0 in enumerate(truth_f):
@@ -75,7 +80,7 @@ def _run(n_records, duration, representative):
                 rows.append(row)
                 shapes.append(found)
             a = np.array(rows)
-            name = f"{'input/output' if with_input else 'output-only'}, {call}"
+            name = f"{structure}, {'input/output' if with_input else 'output-only'}, {call}"
             if call != "true order":
                 name += f" (representative {representative!r})"
             out[name] = a
@@ -119,4 +124,4 @@ def _table(name, a, truth_f, n_records, duration):
 
 if __name__ == "__main__":
     main(int(sys.argv[1]) if len(sys.argv) > 1 else 200, float(sys.argv[2]) if len(sys.argv) > 2 else 400.0,
-         sys.argv[3] if len(sys.argv) > 3 else "median")
+         sys.argv[3] if len(sys.argv) > 3 else "median", sys.argv[4] if len(sys.argv) > 4 else "chain")

@@ -79,8 +79,8 @@ def test_selected_sigma_mc(capsys):
 
 @pytest.mark.slow
 def test_indicators_mc(capsys):
-    out = _module("indicators_mc").main(n_records=2, duration=60.0, representative="lowest")
-    assert len(out) == 4 and all(a.shape == (2, 6, 12) for a in out.values())
+    out = _module("indicators_mc").main(n_records=2, duration=60.0, representative="lowest", structure="frame")
+    assert len(out) == 4 and all(a.shape == (2, 4, 12) for a in out.values())  # the frame's 4 modes
     text = capsys.readouterr().out
     assert "same-mode rejected at 5 %" in text and "engineer's call (representative 'lowest')" in text
 
