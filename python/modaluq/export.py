@@ -202,8 +202,9 @@ def report(diagram, selected, *, stamp: dict | None = None, extra: dict | None =
     out["clustering"] = {k: sel[k] for k in ("clustering", "min_cluster_size", "dropped_clusters")}
     out["low_signal_to_noise"] = sel["low_signal_to_noise"]
     out["units"] = {"frequency_hz": "Hz", "damping_ratio": "fraction (0.02 = 2 %)",
-                    "std": f"analytic (delta-method) standard deviation, {selected.std_words} (its poles that are "
-                           "not noise-coupled and not at a close cut)",
+                    "std": f"analytic (delta-method) standard deviation, {selected.std_words}"
+                           + ("" if selected.settings.representative == "lowest"
+                              else " (its poles that are not noise-coupled and not at a close cut)"),
                     "spread": "sample standard deviation across the poles of the mode's cluster",
                     "noise_coupled": "every pole of the mode's cluster is noise-coupled (no first-order std): it "
                                      "may be noise, not a mode",

@@ -31,6 +31,8 @@ __all__ = ["DropReason", "SelectedModes", "default_cluster_std", "dropped_reason
 
 #: ``ClusteringSettings.cluster_std`` in words, for tables and exports
 CLUSTER_STD_WORDS = {"median": "median over the cluster", "mean": "of the mean over the cluster"}
+#: the words with ``ClusteringSettings.representative == "lowest"`` (the mode is one pole, σ included)
+LOWEST_STD_WORDS = "the pole's own, at the lowest sufficient order"
 
 
 def default_cluster_std(diagram) -> str:
@@ -266,6 +268,8 @@ class SelectedModes:
     @property
     def std_words(self) -> str:
         """How ``frequency_std`` and ``damping_std`` were formed, in words ("median over the cluster")."""
+        if self.settings.representative == "lowest":
+            return LOWEST_STD_WORDS
         return CLUSTER_STD_WORDS.get(self.settings.cluster_std, CLUSTER_STD_WORDS["median"])
 
     def __str__(self) -> str:

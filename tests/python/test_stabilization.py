@@ -612,3 +612,16 @@ def test_horizon_check_finds_every_mode_at_each_horizon_and_reports_the_spread()
     assert "settings check: block_rows 75, 100, 150" in str(check)
     with pytest.raises(ValueError, match="factors"):
         modaluq.check_horizons(sim.y, fs=sim.fs, frequency_range=(1, 20), factors=(0.0,))
+
+
+def test_lowest_representative_says_whose_std_it_reports(chain_selection):
+    _, diagram, sel = chain_selection
+    low = diagram.select_modes(representative="lowest")
+    assert "std: analytic, the pole's own, at the lowest sufficient order" in str(low)
+    assert "median over the cluster" in str(sel)
+    assert low.settings.to_dict()["representative"] == "lowest"
+    from modaluq.export import report
+
+    assert report(diagram, low)["units"]["std"] == ("analytic (delta-method) standard deviation, the pole's own, at "
+                                                    "the lowest sufficient order")
+    assert report(diagram, sel)["units"]["std"].endswith("(its poles that are not noise-coupled and not at a close cut)")

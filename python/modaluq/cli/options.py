@@ -107,9 +107,10 @@ def add_analysis_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--min-cluster-size", type=integer_option(1), default=None, metavar="N",
                    help=f"poles a mode needs (default: {k.min_cluster_size or automatic})")
     g.add_argument("--representative", choices=("median", "lowest"), default=None,
-                   help="the pole of each mode's cluster whose f, damping and shape are reported: nearest to "
-                        "the cluster's median f and damping, or at the lowest order at or above the noise "
-                        f"floor, whose shape sigma is calibrated (default {k.representative})")
+                   help="the pole of each mode's cluster that is reported: nearest to the cluster's median f "
+                        "and damping (with the cluster's std), or the one at the lowest order that holds every "
+                        "selected mode and is not below the noise floor (with its own std, whose shape std is "
+                        f"calibrated; docs/shapes.md) (default {k.representative})")
 
 
 def _given(args, names) -> dict:
