@@ -54,7 +54,8 @@ def _file_names(orders) -> list:
 #: Options of the simulation only (refused with --split-halves) and of the record only (refused without).
 SIMULATION_ONLY = ("records", "samples", "unknown_input_std", "damping_ratio", "n_dof", "input_dofs", "output_dofs",
                    "seed", "processes", "noise_coupling_limit")
-RECORD_ONLY = ("fs", "format", "read_option", "inputs", "outputs", "frequency_range", "start", "stop")
+RECORD_ONLY = ("fs", "format", "read_option", "inputs", "outputs", "frequency_range", "start", "stop",
+               "representative")
 
 
 def _option(name: str) -> str:
@@ -64,7 +65,7 @@ def _option(name: str) -> str:
 def run_split_halves(args) -> int:
     """``modaluq validate --split-halves FILE``: the measured-record check of σ."""
     from ..analysis import Analysis
-    from ..settings import Settings
+    from ..settings import ClusteringSettings, Settings
     from ..validation import split_halves
     from .identify import parse_read_options
 
@@ -85,9 +86,11 @@ def run_split_halves(args) -> int:
         if args.block_correlation_correction:
             given["block_correlation_correction"] = True
         settings = Settings(**given, **({"orders": args.order} if args.order is not None else {}))
+        clustering = ClusteringSettings(**({} if args.representative is None
+                                           else {"representative": args.representative}))
         analysis = Analysis.from_file(args.split_halves, fs=args.fs, format=args.format,
                                       read_options=parse_read_options(args.read_option), outputs=args.outputs,
-                                      inputs=args.inputs, settings=settings)
+                                      inputs=args.inputs, settings=settings, clustering=clustering)
         kw = {} if args.tolerance is None else {"max_frequency_difference": args.tolerance}
         if not args.no_progress:
             print(f"identifying the two halves of {args.split_halves} ...", file=sys.stderr)
@@ -221,6 +224,8 @@ def register(subparsers) -> None:
     g.add_argument("--start", type=real_option(0, low_open=False), default=None, metavar="S",
                    help="start of the window that is split, s")
     g.add_argument("--stop", type=real_option(0), default=None, metavar="S", help="end of that window, s")
+    g.add_argument("--representative", choices=("median", "lowest"), default=None,
+                   help="which pole of each mode's cluster is compared, as for modaluq identify (default median)")
     v.add_argument("--out", metavar="DIR", default=None,
                    help="directory for report.md, results.csv, summary.csv, results.npz and the histogram PNGs "
                         "(--split-halves: report.md and pairs.csv)")

@@ -92,9 +92,26 @@ def test_cli_split_halves_end_to_end(record, tmp_path, capsys):
     assert (out / "pairs.csv").read_text().splitlines()[0].startswith("frequency_hz_1,frequency_hz_2")
 
 
+def test_cli_split_halves_reads_the_modes_at_the_representative_asked_for(record, tmp_path, capsys):
+    """--representative lowest: the report of split_halves on an Analysis with that clustering."""
+    csv = tmp_path / "rec.csv"
+    np.savetxt(csv, np.column_stack([np.arange(len(record.y)) / record.fs, record.y]), delimiter=",",
+               header="time [s],a,b,c", comments="")
+    argv = ["validate", "--split-halves", str(csv), "--block-rows", "15", "--order", *map(str, range(2, 31, 2)),
+            "--n-blocks", "30", "--no-progress"]
+    assert main([*argv, "--representative", "lowest"]) == 0
+    lowest = capsys.readouterr().out
+    analysis = Analysis.from_file(csv, settings=SETTINGS,
+                                  clustering=modaluq.ClusteringSettings(representative="lowest"))
+    assert lowest == split_halves(analysis).report()
+    assert main(argv) == 0
+    assert capsys.readouterr().out != lowest  # the modes are read at other orders
+
+
 @pytest.mark.parametrize("argv, message", [
     (["--split-halves", "x.csv", "--records", "3"], "--records: option(s) of the simulation"),
     (["--fs", "10"], "--fs: option(s) of --split-halves FILE"),
+    (["--representative", "lowest"], "--representative: option(s) of --split-halves FILE"),
     (["--split-halves", "missing.csv"], "missing.csv"),
 ])
 def test_cli_split_halves_options_are_checked(argv, message, capsys):
