@@ -14,6 +14,7 @@ input_dofs=(0, 3)), true order 8).
 Usage: python studies/indicators_mc.py [N] [seconds] [representative] [structure]
        (default 200 records of 400 s, "median", "chain": ~6 min)
 """
+import pathlib
 import sys
 import warnings
 
@@ -21,6 +22,9 @@ import numpy as np
 
 import modaluq
 from modaluq.indicators import mac_test, modal_phase_collinearity, shape_covariance
+
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
+from above_order_diagnosis import _stats  # noqa: E402  (median σ/σ_MC, coverage of ±1.96 σ, RMS z)
 
 FS = 50.0
 #: structure: (modaluq.simulate keywords, true order)
@@ -96,14 +100,6 @@ def _ratio(values, sigmas):
     return mc, np.median(sigmas[ok]), np.median(sigmas[ok]) / mc
 
 
-def _coverage(values, sigmas):
-    """Share of the records whose value ± 1.96 σ holds the records' mean."""
-    ok = np.isfinite(values) & np.isfinite(sigmas)
-    if ok.sum() < 3:
-        return np.nan
-    return float(np.mean(np.abs(values[ok] - values[ok].mean()) <= 1.96 * sigmas[ok]))
-
-
 def _table(name, a, truth_f, n_records, duration):
     print(f"\n{name}: {n_records} records of {duration:g} s (paired: {n_records // 2})")
     print("| mode | f (Hz) | found | std MPC (MC) | median σ | ratio | std MAC vs truth (MC) | median σ | ratio "
@@ -116,8 +112,10 @@ def _table(name, a, truth_f, n_records, duration):
             cells += [f"{mc:.2e}", f"{med:.2e}", f"{r:.2f}"]
         p = a[:, k, 6][np.isfinite(a[:, k, 6])]
         rej = f"{np.mean(p < 0.05) * 100:.1f} % of {p.size}" if p.size else "-"
-        fx = [f"{_ratio(a[:, k, v], a[:, k, v + 1])[2]:.2f}, {_coverage(a[:, k, v], a[:, k, v + 1]) * 100:.0f} %"
-              for v in (8, 10)]
+        fx = []
+        for v in (8, 10):  # f, ξ
+            ratio, coverage = _stats(a[:, k, v], a[:, k, v + 1])[:2]
+            fx.append(f"{ratio:.2f}, {coverage * 100:.0f} %")
         print(f"| {k + 1} | {f0:.3f} | {int(np.nansum(a[:, k, 7]))}/{n_records} | " + " | ".join(cells)
               + f" | {rej} | " + " | ".join(fx) + " |")
 
