@@ -24,6 +24,7 @@ void modaluq::python::bind_identify(py::module_& m) {
         .def_readonly("mode_shape_std_imag", &Modes::mode_shape_std_imag)
         .def_readonly("covariance", &Modes::covariance)
         .def_readonly("frequency_damping_factor", &Modes::frequency_damping_factor)
+        .def_readonly("mode_shape_factor", &Modes::mode_shape_factor)
         .def_readonly("frequency_damping_correlation", &Modes::frequency_damping_correlation)
         .def_readonly("block_too_short", &Modes::block_too_short)
         .def_readonly("singular_value_gap", &Modes::singular_value_gap)
@@ -68,6 +69,7 @@ void modaluq::python::bind_identify(py::module_& m) {
         .def_readwrite("block_correlation_correction", &IdentifyOptions::block_correlation_correction)
         .def_readwrite("bootstrap_draws", &IdentifyOptions::bootstrap_draws)
         .def_readwrite("coupling_sketch", &IdentifyOptions::coupling_sketch)
+        .def_readwrite("keep_shape_factor", &IdentifyOptions::keep_shape_factor)
         .def("validate", &IdentifyOptions::validate)
         .def_property_readonly_static("max_threads", [](py::object) { return IdentifyOptions::kMaxThreads; })
         .def_property_readonly_static("min_bootstrap_draws",

@@ -21,6 +21,11 @@ void modaluq::python::bind_indicators(py::module_& m) {
           py::arg("cov"));
     m.def("mean_phase_deviation", &mean_phase_deviation, py::arg("shape"), py::arg("cov") = Eigen::MatrixXd());
     m.def("modal_assurance", &modal_assurance, py::arg("a"), py::arg("b"));
-    m.def("modal_assurance_statistics", &modal_assurance_statistics, py::arg("a"), py::arg("cov_a"), py::arg("b"),
-          py::arg("cov_b"));
+    using Independent = IndicatorStatistics (*)(const Eigen::VectorXcd&, const Eigen::MatrixXd&,
+                                                const Eigen::VectorXcd&, const Eigen::MatrixXd&);
+    using Joint = IndicatorStatistics (*)(const Eigen::VectorXcd&, const Eigen::VectorXcd&, const Eigen::MatrixXd&);
+    m.def("modal_assurance_statistics", static_cast<Independent>(&modal_assurance_statistics), py::arg("a"),
+          py::arg("cov_a"), py::arg("b"), py::arg("cov_b"));
+    m.def("modal_assurance_statistics_joint", static_cast<Joint>(&modal_assurance_statistics), py::arg("a"),
+          py::arg("b"), py::arg("joint"));
 }

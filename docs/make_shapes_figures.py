@@ -20,15 +20,15 @@ IMG = ROOT / "docs" / "img"
 DATA = Path(sys.argv[1]) if len(sys.argv) > 1 else Path("/work/shared/data")
 
 
-def analysis(name):
-    a = modaluq.Analysis.from_file(DATA / name)
+def analysis(name, **settings):
+    a = modaluq.Analysis.from_file(DATA / name, settings=modaluq.Settings(**settings))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", modaluq.ModalUQWarning)
         a.run()
     return a
 
 
-frame = analysis("koma_shearframe_sim.npz")
+frame = analysis("koma_shearframe_sim.npz", keep_shape_factor=True)  # the AutoMAC's exact σ
 geo = modaluq.Geometry.from_toml(ROOT / "examples/geometry/koma_shearframe.toml")
 frame.selected.plot_shape(2, geometry=geo, magnify_envelope=10).savefig(IMG / "shapes_frame_mode2.png", dpi=100)
 

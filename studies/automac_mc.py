@@ -1,90 +1,99 @@
-"""The σ of the AutoMAC (the MAC between two modes of ONE identification): the independent-shape
-approximation modaluq draws (:func:`modaluq.indicators.mac_matrix`) against the exact second-order σ
-with the shapes' cross-covariance, and both against Monte Carlo over records.
+"""The σ of the AutoMAC (the MAC between two modes of ONE identification) against Monte Carlo:
+the exact second-order σ with the shapes' cross-covariance V_i V_jᵀ (``identify(...,
+keep_shape_factor=True)``, :func:`modaluq.indicators.mac_matrix` with ``factors``) and the
+independent-shape approximation (cross term 0, what the package gives without the factors).
 
-The core keeps each pole's covariance, not the factor F it is made of (Σ = F Fᵀ, one column per
-block), so the cross-covariance F_i F_jᵀ of two modes is unknown to the package; the NumPy
-reference ``tests/python/oracle.py`` (``identify_factor``) returns the factors. The paper's 6-DOF
-chain at the true order 12 (block_rows 10, n_blocks 50), output-only and input/output.
+The paper's 6-DOF chain, output-only and input/output, at the true order 12 (block_rows 10,
+n_blocks 50, records of ``n_samples``) and in the engineer's call (``identify(y, u, fs,
+frequency_range=(1, 20), keep_shape_factor=True).select_modes()``, records of the same length),
+with the default representative of each cluster and with ``representative="lowest"``.
+The core's factors equal the NumPy reference's (``tests/python/oracle.py`` ``identify_factor``;
+tests/python/test_indicators.py).
 
-    OPENBLAS_NUM_THREADS=1 python studies/automac_mc.py 80      # records; ~2 min per configuration
+    OPENBLAS_NUM_THREADS=1 python studies/automac_mc.py 200     # records; ~10 min
 
-Prints, per pair of modes: the median MAC, its std over records, and the median σ over records
-divided by that std, for the approximation (cross term 0) and the exact cross term. docs/shapes.md §6.
+Prints, per pair of modes: the median MAC, its std over records (σ_MC), and the median σ over
+records divided by σ_MC, for the approximation and the exact cross term. docs/shapes.md §6.
 """
 
-import os
 import sys
 import time
+import warnings
 
 import numpy as np
 
-sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "tests", "python"))
-import modaluq  # noqa: E402
-import oracle  # noqa: E402
-from modaluq.indicators import mac_matrix  # noqa: E402
+import modaluq
+from modaluq.indicators import mac_matrix
 
 ORDER = 12
+N_MODES = 6
 
 
-def mac_of(z, l):
-    a, b = z[:l] + 1j * z[l:2 * l], z[2 * l:3 * l] + 1j * z[3 * l:]
-    return abs(np.vdot(a, b)) ** 2 / (np.vdot(a, a).real * np.vdot(b, b).real)
+def _automac(sim, with_input, call):
+    """(MAC, σ approximation, σ exact) of the six modes of one record, each (6, 6), or None when
+    the six modes are not found one to one."""
+    u = sim.u if with_input else None
+    truth = np.sort(sim.frequency_hz)
+    if call == "true order":
+        r = modaluq.identify(sim.y, u, fs=sim.fs, block_rows=10, orders=[ORDER], n_blocks=50, keep_shape_factor=True)
+        m = r.at_order(ORDER)
+        f, phi, cov, v = m.frequency_hz, m.mode_shape, m.covariance, m.mode_shape_factor
+    else:  # "engineer's call" or "engineer's call, lowest" (ClusteringSettings.representative)
+        r = modaluq.identify(sim.y, u, fs=sim.fs, frequency_range=(1, 20), keep_shape_factor=True)
+        sel = r.stabilization_diagram().select_modes(representative="lowest" if call.endswith("lowest") else "median")
+        f, phi, cov, v = sel.frequency_hz, sel.mode_shape, sel.mode_covariance, sel.mode_shape_factor
+    pick = [np.flatnonzero(np.abs(f / f0 - 1) < 0.02) for f0 in truth]
+    if any(p.size == 0 for p in pick):
+        return None
+    pick = [p[np.argmin(np.abs(f[p] - f0))] for p, f0 in zip(pick, truth)]
+    if len(set(pick)) != N_MODES:
+        return None
+    approx = mac_matrix(phi[:, pick], cov[pick])
+    exact = mac_matrix(phi[:, pick], cov[pick], v[pick])
+    return approx.mac, approx.std, exact.std
 
 
-def exact_std(a, b, joint, h=1e-5):
-    """Second-order σ of the MAC (docs/uq-math.md §12) for the joint covariance of [Re a, Im a, Re b, Im b],
-    the derivatives by central differences."""
-    l = a.size
-    z = np.concatenate([a.real, a.imag, b.real, b.imag])
-    e = np.eye(z.size) * h
-    g = np.array([(mac_of(z + d, l) - mac_of(z - d, l)) / (2 * h) for d in e])
-    hess = np.array([[(mac_of(z + di + dj, l) - mac_of(z + di - dj, l) - mac_of(z - di + dj, l)
-                       + mac_of(z - di - dj, l)) / (4 * h * h) for dj in e] for di in e])
-    hs = hess @ joint
-    tr2 = np.sum(hs * hs.T)
-    return np.sqrt(max(g @ joint @ g - tr2, 0.0) + 0.5 * tr2)
-
-
-def run(n_records, with_input, n_samples=20000):
+def run(n_records, with_input, call, n_samples=20000):
     macs, approx, exact = [], [], []
     for r in range(n_records):
         sim = modaluq.simulate(n_samples, seed=100 + r)
-        res = oracle.identify_factor(sim.y, sim.u if with_input else None, fs=sim.fs, block_rows=10,
-                                     orders=[ORDER], n_blocks=50)[ORDER]
-        factor, phi = res["factor"], res["mode_shape"]
-        if phi.shape[1] != 6:
+        found = _automac(sim, with_input, call)
+        if found is None:
             continue
-        mm = mac_matrix(phi, res["covariance"])
-        ex = np.zeros((6, 6))
-        for i in range(6):
-            for j in range(i + 1, 6):
-                fa, fb = factor[i][2:], factor[j][2:]
-                joint = np.block([[fa @ fa.T, fa @ fb.T], [fb @ fa.T, fb @ fb.T]])
-                ex[i, j] = ex[j, i] = exact_std(phi[:, i], phi[:, j], joint)
-        macs.append(mm.mac)
-        approx.append(mm.std)
-        exact.append(ex)
+        macs.append(found[0])
+        approx.append(found[1])
+        exact.append(found[2])
     return np.array(macs), np.array(approx), np.array(exact)
 
 
-def main(n_records=80, n_samples=20000):
+CALLS = ("true order", "engineer's call", "engineer's call, lowest")
+
+
+def main(n_records=80, n_samples=20000, calls=CALLS):
     out = {}
-    for name, with_input in (("output-only", False), ("input/output", True)):
-        t = time.process_time()
-        macs, approx, exact = run(n_records, with_input, n_samples)
-        out[name] = (macs, approx, exact)
-        print(f"\n{name}: {macs.shape[0]} records, {time.process_time() - t:.0f} CPU s")
-        print("| pair | MAC | σ_MC | approx. / σ_MC | exact / σ_MC |\n|---|---|---|---|---|")
-        if macs.shape[0] < 2:
-            continue
-        mc = macs.std(axis=0, ddof=1)
-        for i in range(6):
-            for j in range(i + 1, 6):
-                print(f"| {i + 1}-{j + 1} | {np.median(macs[:, i, j]):.3f} | {mc[i, j]:.2e} | "
-                      f"{np.median(approx[:, i, j]) / mc[i, j]:.2f} | {np.median(exact[:, i, j]) / mc[i, j]:.2f} |")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for call in calls:
+            for name, with_input in (("output-only", False), ("input/output", True)):
+                t = time.process_time()
+                macs, approx, exact = run(n_records, with_input, call, n_samples)
+                out[f"{name}, {call}"] = (macs, approx, exact)
+                print(f"\n{name}, {call}: {macs.shape[0]} of {n_records} records with the six modes, "
+                      f"{time.process_time() - t:.0f} CPU s")
+                print("| pair | MAC | σ_MC | approx. / σ_MC | exact / σ_MC |\n|---|---|---|---|---|")
+                if macs.shape[0] < 2:
+                    continue
+                mc = macs.std(axis=0, ddof=1)
+                ra, re = [], []
+                for i in range(N_MODES):
+                    for j in range(i + 1, N_MODES):
+                        ra.append(np.median(approx[:, i, j]) / mc[i, j])
+                        re.append(np.median(exact[:, i, j]) / mc[i, j])
+                        print(f"| {i + 1}-{j + 1} | {np.median(macs[:, i, j]):.3f} | {mc[i, j]:.2e} | "
+                              f"{ra[-1]:.2f} | {re[-1]:.2f} |")
+                print(f"| all 15 pairs | | | {min(ra):.2f}–{max(ra):.2f} | {min(re):.2f}–{max(re):.2f} |")
     return out
 
 
 if __name__ == "__main__":
-    main(int(sys.argv[1]) if len(sys.argv) > 1 else 80)
+    main(int(sys.argv[1]) if len(sys.argv) > 1 else 200, calls=tuple(sys.argv[2:]) or CALLS)

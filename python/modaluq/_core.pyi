@@ -8,7 +8,7 @@ import collections.abc
 import numpy
 import numpy.typing
 import typing
-__all__: list[str] = ['ClusterStd', 'ClusteringOptions', 'CovarianceAccumulator', 'CovarianceAccumulatorState', 'Covariances', 'Diagram', 'DropReason', 'HankelLayout', 'Identification', 'IdentificationWarning', 'IdentifyOptions', 'IndicatorStatistics', 'Linkage', 'Modes', 'NumericalError', 'PoleStatus', 'Poles', 'PoserOptions', 'PoserResult', 'PoserSetupModes', 'Representative', 'SelectedModes', 'SetupData', 'SetupsIdentification', 'SlowDecay', 'StabilityCriteria', 'blas_library', 'builds', 'cluster_labels', 'compute_covariances', 'cpu_path', 'eigen_simd', 'eigen_version', 'identify', 'identify_covariances', 'identify_setups', 'mean_phase_deviation', 'modal_assurance', 'modal_assurance_criterion', 'modal_assurance_statistics', 'modal_phase_collinearity', 'modal_phase_collinearity_statistics', 'poles_of', 'poser_merge', 'select_modes', 'stabilization_diagram', 'uses_blas']
+__all__: list[str] = ['ClusterStd', 'ClusteringOptions', 'CovarianceAccumulator', 'CovarianceAccumulatorState', 'Covariances', 'Diagram', 'DropReason', 'HankelLayout', 'Identification', 'IdentificationWarning', 'IdentifyOptions', 'IndicatorStatistics', 'Linkage', 'Modes', 'NumericalError', 'PoleStatus', 'Poles', 'PoserOptions', 'PoserResult', 'PoserSetupModes', 'Representative', 'SelectedModes', 'SetupData', 'SetupsIdentification', 'SlowDecay', 'StabilityCriteria', 'blas_library', 'builds', 'cluster_labels', 'compute_covariances', 'cpu_path', 'eigen_simd', 'eigen_version', 'identify', 'identify_covariances', 'identify_setups', 'mean_phase_deviation', 'modal_assurance', 'modal_assurance_criterion', 'modal_assurance_statistics', 'modal_assurance_statistics_joint', 'modal_phase_collinearity', 'modal_phase_collinearity_statistics', 'poles_of', 'poser_merge', 'select_modes', 'stabilization_diagram', 'uses_blas']
 class NumericalError(ArithmeticError):
     pass
 class HankelLayout:
@@ -249,6 +249,9 @@ class Modes:
     def mode_shape(self) -> typing.Annotated[numpy.typing.NDArray[numpy.complex128], "[m, n]"]:
         ...
     @property
+    def mode_shape_factor(self) -> typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, n]"]:
+        ...
+    @property
     def mode_shape_std_imag(self) -> typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, n]"]:
         ...
     @property
@@ -353,6 +356,7 @@ class IdentifyOptions:
     block_correlation_correction: bool
     demean: bool
     freeze_noise: bool
+    keep_shape_factor: bool
     uncertainty: bool
     def __init__(self) -> None:
         ...
@@ -1313,6 +1317,8 @@ def modal_assurance(a: typing.Annotated[numpy.typing.ArrayLike, numpy.complex128
 def modal_assurance_criterion(shape_a: typing.Annotated[numpy.typing.NDArray[numpy.complex128], "[m, n]", "flags.f_contiguous"], shape_b: typing.Annotated[numpy.typing.NDArray[numpy.complex128], "[m, n]", "flags.f_contiguous"]) -> typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, n]"]:
     ...
 def modal_assurance_statistics(a: typing.Annotated[numpy.typing.ArrayLike, numpy.complex128, "[m, 1]"], cov_a: typing.Annotated[numpy.typing.ArrayLike, numpy.float64, "[m, n]"], b: typing.Annotated[numpy.typing.ArrayLike, numpy.complex128, "[m, 1]"], cov_b: typing.Annotated[numpy.typing.ArrayLike, numpy.float64, "[m, n]"]) -> IndicatorStatistics:
+    ...
+def modal_assurance_statistics_joint(a: typing.Annotated[numpy.typing.ArrayLike, numpy.complex128, "[m, 1]"], b: typing.Annotated[numpy.typing.ArrayLike, numpy.complex128, "[m, 1]"], joint: typing.Annotated[numpy.typing.ArrayLike, numpy.float64, "[m, n]"]) -> IndicatorStatistics:
     ...
 def modal_phase_collinearity(shape: typing.Annotated[numpy.typing.ArrayLike, numpy.complex128, "[m, 1]"]) -> float:
     ...

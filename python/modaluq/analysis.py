@@ -303,7 +303,8 @@ class Analysis:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
                 self.horizons = horizons.check_horizons(
-                    pre.y, pre.u, fs=pre.fs, settings=s.replace(block_rows=result.settings["block_rows"], orders=None),
+                    pre.y, pre.u, fs=pre.fs, settings=s.replace(block_rows=result.settings["block_rows"], orders=None,
+                                                                keep_shape_factor=False),
                     criteria=self.criteria, clustering=self.clustering, progress=step)
         return self
 

@@ -105,14 +105,15 @@ def minimum_samples(n_outputs: int) -> int:
 def choose_settings(n_samples: int, fs: float, n_outputs: int, *, frequency_range=None,
                     n_references: int | None = None, block_rows: int | None = None,
                     orders=None, n_blocks: int | None = None, n_inputs: int = 0, uncertainty: bool = True,
-                    threads: int = 1) -> ChosenSettings:
+                    threads: int = 1, bootstrap_draws: int = 0, keep_shape_factor: bool = False) -> ChosenSettings:
     """Fill in ``block_rows``, ``orders`` and ``n_blocks`` by the rules of this module.
 
     Settings given are kept (and the others are chosen around them). Returns
     :class:`ChosenSettings` whose ``reasons`` say what was chosen from what. The settings chosen
-    fit the memory available (:func:`modaluq.checks.check_cost`; ``n_inputs``, ``uncertainty``
-    and ``threads`` enter that estimate): when they would not, the chosen ``n_blocks`` and then
-    ``block_rows`` are lowered until they do, and the reasons say so.
+    fit the memory available (:func:`modaluq.checks.check_cost`; ``n_inputs``, ``uncertainty``,
+    ``threads``, ``bootstrap_draws`` and ``keep_shape_factor`` enter that estimate): when they
+    would not, the chosen ``n_blocks`` and then ``block_rows`` are lowered until they do, and the
+    reasons say so.
 
     Examples
     --------
@@ -176,7 +177,8 @@ def choose_settings(n_samples: int, fs: float, n_outputs: int, *, frequency_rang
     else:
         n_b = check_integer("n_blocks", n_blocks, minimum=2)
     p, orders, n_b = _fit_memory(reasons, n_samples, l, r, p, orders, n_b, n_inputs=n_inputs,
-                                 uncertainty=uncertainty, threads=threads, chosen=(block_rows is None,
+                                 uncertainty=uncertainty, threads=threads, bootstrap_draws=bootstrap_draws,
+                                 keep_shape_factor=keep_shape_factor, chosen=(block_rows is None,
                                                                                    orders_chosen, n_blocks is None))
     return ChosenSettings(block_rows=p, orders=tuple(orders) if not isinstance(orders, int) else (orders,),
                           n_blocks=n_b, reasons=tuple(reasons))
@@ -213,7 +215,8 @@ def lag_warning(block_rows: int, fs: float, frequency_range) -> str | None:
 
 
 def _fit_memory(reasons: list, n_samples: int, l: int, r: int, p: int, orders, n_b: int, *, n_inputs: int,
-                uncertainty: bool, threads: int, chosen: tuple):
+                uncertainty: bool, threads: int, chosen: tuple, bootstrap_draws: int = 0,
+                keep_shape_factor: bool = False):
     """``(p, orders, n_b)`` lowered, where they were chosen, until the estimate of
     :func:`modaluq.checks.estimate_cost` fits the memory available: first the blocks (to the
     fewest that still give every mode's covariance full rank, then 2), then the horizon (halved,
@@ -224,7 +227,8 @@ def _fit_memory(reasons: list, n_samples: int, l: int, r: int, p: int, orders, n
 
     def need(p_, orders_, n_b_):
         return estimate_cost(n_samples, l, n_inputs, block_rows=p_, n_references=r, orders=orders_, n_blocks=n_b_,
-                             uncertainty=uncertainty, threads=threads).bytes
+                             uncertainty=uncertainty, threads=threads, bootstrap_draws=bootstrap_draws,
+                             keep_shape_factor=keep_shape_factor).bytes
 
     if need(p, orders, n_b) <= have:
         return p, orders, n_b

@@ -204,7 +204,7 @@ class Cost(NamedTuple):
 
 def estimate_cost(n_samples: int, n_outputs: int, n_inputs: int, *, block_rows: int, past_block_rows=None,
                   n_references=None, orders, n_blocks, uncertainty: bool = True, threads: int = 1,
-                  bootstrap_draws: int = 0) -> Cost:
+                  bootstrap_draws: int = 0, keep_shape_factor: bool = False) -> Cost:
     """Conservative estimate of the peak memory (and a rough time) of one identification.
 
     From the sizes the core allocates (cpp/include/modaluq, docs/settings.md "Memory"), with
@@ -218,7 +218,8 @@ def estimate_cost(n_samples: int, n_outputs: int, n_inputs: int, *, block_rows: 
     these phases, plus the lag sums (n_b + threads)(p + q + 1) d (d + 1), d = l + m ((r + 1) for
     d + 1 output-only). With ``bootstrap_draws`` (docs/uq-math.md §5.6) T_H (ab n_b) stays through the
     orders, and each thread holds a perturbed H and its SVD (ab + svd); B SVDs and B eigenvalue
-    problems per order are added to the time. ``n_samples`` 0: from covariances
+    problems per order are added to the time. With ``keep_shape_factor`` each pole also holds its
+    shape factor, 2 l n_b values. ``n_samples`` 0: from covariances
     (streaming), no covariance pass. Measured peaks are 0.5 to 1 times it (tests/python/
     test_faults_resources.py).
     """
@@ -241,7 +242,7 @@ def estimate_cost(n_samples: int, n_outputs: int, n_inputs: int, *, block_rows: 
     realization = 2 * (a + b) * s + 2 * a * n
     block_q = 2 * nb * (2 * n * n + l * n)
     per_order = t * (6 * nb * n * n + 4 * l * nb * n + 4 * a * n) if nb else t * 4 * a * n
-    shape = (2 + 2 * l) ** 2 + 6 * l + 12 if nb else 2 * l + 6
+    shape = (2 + 2 * l) ** 2 + 6 * l + 12 + (2 * l * nb if keep_shape_factor else 0) if nb else 2 * l + 6
     # about n/2 poles at order n (complex pairs), held once: Python's Modes view the core's arrays
     result = sum(min(o, n) for o in order_list) * shape // 2
     phases = {
@@ -327,7 +328,7 @@ def check_cost(n_samples: int, n_outputs: int, n_inputs: int, settings, *, n_ref
                          n_references=n_references if n_references is not None else
                          (len(s.references) if s.references else None),
                          orders=s.orders, n_blocks=s.n_blocks, uncertainty=s.uncertainty, threads=s.threads,
-                         bootstrap_draws=s.bootstrap_draws)
+                         bootstrap_draws=s.bootstrap_draws, keep_shape_factor=s.keep_shape_factor)
     have, source = available_memory()
     if cost.bytes > have:
         raise ValueError(f"these settings would need about {_gb(cost.bytes)} of memory ({describe_cost(s, cost)}) "

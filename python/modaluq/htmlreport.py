@@ -113,7 +113,7 @@ def _diagram_figure(go, diagram, selected, spectrum):
 
 def _mac_figure(go, selected):
     phi = np.asarray(selected.mode_shape, complex)
-    mm = mac_matrix(phi, getattr(selected, "mode_covariance", None))
+    mm = mac_matrix(phi, getattr(selected, "mode_covariance", None), getattr(selected, "mode_shape_factor", None))
     mac, std = mm.mac, mm.std
     labels = [f"{k + 1}: {selected.frequency_hz[k]:.4g} Hz" for k in range(selected.n_modes)]
     with_std = bool(np.isfinite(std).all())
@@ -123,8 +123,9 @@ def _mac_figure(go, selected):
                                text=[[f"{v:.3f}" for v in row] for row in mac], texttemplate="%{text}",
                                customdata=hover,
                                hovertemplate="MAC(%{y}, %{x}) = %{customdata}<extra></extra>"))
-    note = ("<br><sub>hover: ±1σ, shapes taken as independent (their cross-covariance is not kept)</sub>"
-            if with_std else "")
+    note = ("" if not with_std else "<br><sub>hover: ±1σ, shapes taken as independent (their cross-covariance "
+            "is not kept)</sub>" if mm.independent_approximation else "<br><sub>hover: ±1σ, with the shapes' "
+            "cross-covariance</sub>")
     fig.update_layout(title="MAC of the selected modes" + note, height=max(320, 60 + 40 * selected.n_modes),
                       width=max(420, 160 + 60 * selected.n_modes), yaxis={"autorange": "reversed"})
     return fig

@@ -125,6 +125,13 @@ def identify(y, u=None, *, fs: float, settings: Settings | None = None,
         (``select_modes``), which average over many orders, come out conservative with it (up to
         2× too wide; docs/validation.md, "Issue 27" (g)), and are calibrated without it. One record
         only (``identify_setups`` refuses it).
+    keep_shape_factor : bool
+        Keep each pole's first-order factor of its shape (``Modes.mode_shape_factor``, default
+        False): two modes of one record share the data, and the σ of the MAC between them
+        (``SelectedModes.mac_matrix()``, the AutoMAC plot and the report) is exact only with their
+        cross-covariance, which this factor gives; without it that cross-covariance is taken as 0
+        (within about ±20 %, docs/shapes.md §6). Costs 2 n_outputs n_blocks values per pole (about
+        60 MB for 30 channels, 50 blocks and orders 2..100).
 
     frequency_range : (float, float), optional
         Band of interest (f_low, f_high) in Hz. The record is decimated (anti-aliased) to a
@@ -205,7 +212,8 @@ def identify_quietly(y, u=None, *, fs: float, settings: Settings | None = None,
         n_refs = None if s.references is None else len(s.references)
         chosen = choose_settings(y.shape[0], fs, y.shape[1], frequency_range=band, n_references=n_refs,
                                  block_rows=s.block_rows, orders=s.orders, n_blocks=s.n_blocks,
-                                 n_inputs=0 if u is None else u.shape[1], uncertainty=s.uncertainty, threads=s.threads)
+                                 n_inputs=0 if u is None else u.shape[1], uncertainty=s.uncertainty, threads=s.threads,
+                                 bootstrap_draws=s.bootstrap_draws, keep_shape_factor=s.keep_shape_factor)
         s = s.replace(block_rows=chosen.block_rows, orders=chosen.orders, n_blocks=chosen.n_blocks)
     o = s.to_core(fs)
     # refused here, in a moment, rather than after minutes or with a bare std::bad_alloc
@@ -316,6 +324,9 @@ def identify_setups(setups, *, fs=None, references: Sequence[str] | None = None,
         each setup's blocks instead of every block, which makes the merge about 1.5× faster; a
         flagged pole's σ is then its frozen σ times ρ (docs/uq-math.md §13.4). 0 runs the exact
         test on every block.
+        ``keep_shape_factor`` (default False): each merged pole keeps its global shape's factor
+        over every setup's blocks (``Modes.mode_shape_factor``), for the AutoMAC's σ with the
+        shapes' cross-covariance (see :func:`identify`).
 
     Raises
     ------
@@ -350,7 +361,8 @@ def identify_setups(setups, *, fs=None, references: Sequence[str] | None = None,
         chosen = choose_settings(shortest, rate, widest, frequency_range=band, n_references=r,
                                  block_rows=s.block_rows, orders=s.orders, n_blocks=s.n_blocks,
                                  n_inputs=max((0 if u is None else u.shape[1]) for _, u, _ in records),
-                                 uncertainty=s.uncertainty, threads=s.threads)
+                                 uncertainty=s.uncertainty, threads=s.threads,
+                                 keep_shape_factor=s.keep_shape_factor)
         s = s.replace(block_rows=chosen.block_rows, orders=chosen.orders, n_blocks=chosen.n_blocks)
     o = s.to_core(rate)
     core_setups = []
@@ -383,7 +395,8 @@ def identify_setups(setups, *, fs=None, references: Sequence[str] | None = None,
     result = result_from_core(ident, record, l_g, n_in, output_names=dof_names)
     warn_all(result)
     single = dict(record, setups=None)
-    o_check = s.replace(orders=reference_check_orders(s.orders)).to_core(rate)
+    # the reference check reads f and the shapes only: no shape factors kept for it
+    o_check = s.replace(orders=reference_check_orders(s.orders), keep_shape_factor=False).to_core(rate)
     check_references_after_modular(core_setups, o_check, single, names_per_setup, n_inputs_per_setup, refs)
     return result
 

@@ -144,23 +144,32 @@ class MacMatrix:
     """The MAC between every pair of a set of shapes (an AutoMAC) and its σ (second order)."""
 
     mac: np.ndarray  #: (m, m), symmetric, 1 on the diagonal
-    #: (m, m) σ of each MAC, the shapes' cross-covariances taken as 0 (see :func:`mac_matrix`); 0 on
-    #: the diagonal (a shape's MAC with itself is 1 exactly); NaN without covariances
+    #: (m, m) σ of each MAC (see :func:`mac_matrix`); 0 on the diagonal (a shape's MAC with itself
+    #: is 1 exactly); NaN without covariances
     std: np.ndarray
-    #: True: the σ treat the shapes as independent, which two modes of one identification are not
+    #: True: the σ treat the shapes as independent (no factors given), which two modes of one
+    #: identification are not; False: their cross-covariance from the factors is included
     independent_approximation: bool
 
 
-def mac_matrix(shapes, covariances=None) -> MacMatrix:
+def mac_matrix(shapes, covariances=None, factors=None) -> MacMatrix:
     """AutoMAC of the columns of ``shapes`` (l, m) with the σ of each entry (second order, as
-    :func:`mac_test`) from ``covariances`` ((m, 2l, 2l) of [Re shape; Im shape], or the modes'
-    (m, 2+2l, 2+2l) of [f, ξ, Re shape, Im shape], e.g. ``SelectedModes.mode_covariance``).
+    :func:`mac_test`).
 
-    **Approximation**: the σ of the MAC of modes *i* and *j* needs the cross-covariance of their
-    shapes, which the core does not keep (it stores each pole's covariance, not the factor it
-    is made of). It is taken as 0, as for shapes of two independent records. Against the exact
-    cross term (the NumPy oracle's factors, docs/shapes.md §6) this is within about ±20 % for
-    the simulated chain; the diagonal and the MAC values themselves are exact."""
+    Parameters
+    ----------
+    shapes : (l, m) complex
+    covariances : optional, (m, 2l, 2l) of [Re shape, Im shape], or the modes' (m, 2+2l, 2+2l) of
+        [f, ξ, Re shape, Im shape] (``SelectedModes.mode_covariance``).
+    factors : optional, (m, 2l, n_blocks), each shape's first-order factor V (covariance V Vᵀ;
+        ``SelectedModes.mode_shape_factor``, kept with ``identify(..., keep_shape_factor=True)``).
+        Two modes of one identification share the data, so the σ of their MAC needs the
+        cross-covariance V_i V_jᵀ of their shapes: with ``factors`` it is included (to first
+        order, as each pole's own σ; the covariances are then V Vᵀ and ``covariances`` is ignored).
+
+    Without ``factors`` the cross-covariance is taken as 0, as for shapes of two independent
+    records (``independent_approximation``): against the σ with it this is within about ±20 % on
+    the simulated chain (docs/shapes.md §6). The MAC values themselves are exact either way."""
     phi = np.asarray(shapes)
     if phi.ndim != 2 or 0 in phi.shape:
         raise ValueError(f"shapes must be (n_channels, n_modes) with at least one of each; got shape {phi.shape}")
@@ -170,6 +179,21 @@ def mac_matrix(shapes, covariances=None) -> MacMatrix:
     mac = 0.5 * (mac + mac.T)
     np.fill_diagonal(mac, 1.0)
     std = np.full((m, m), np.nan)
+    if factors is not None:
+        v = np.asarray(factors, dtype=float)
+        if v.ndim != 3 or v.shape[:2] != (m, 2 * l) or v.shape[2] < 1:
+            raise ValueError(f"factors must be ({m}, {2 * l}, n_blocks) shape factors of {m} shapes of {l} "
+                             f"channels; got shape {v.shape}")
+        if not np.isfinite(v).all():
+            raise ValueError("factors must be finite")
+        std[np.diag_indices(m)] = 0.0
+        for i in range(m):
+            for j in range(i + 1, m):
+                vij = np.concatenate([v[i], v[j]])  # the joint factor of [Re φ_i, Im φ_i, Re φ_j, Im φ_j]
+                joint = vij @ vij.T
+                std[i, j] = std[j, i] = float(
+                    _core.modal_assurance_statistics_joint(phi[:, i], phi[:, j], 0.5 * (joint + joint.T)).std)
+        return MacMatrix(mac=mac, std=std, independent_approximation=False)
     if covariances is not None:
         c = np.asarray(covariances, dtype=float)
         if c.ndim != 3 or c.shape[0] != m or c.shape[1:] not in ((2 * l, 2 * l), (2 + 2 * l, 2 + 2 * l)):

@@ -329,8 +329,9 @@ def plot_mac(modes, ax=None, *, figsize=None, title="AutoMAC"):
     ax : matplotlib.axes.Axes, optional
     title : str
 
-    The σ are those of :func:`modaluq.indicators.mac_matrix`: the shapes' cross-covariance is not
-    kept by the core and is taken as 0 (said under the title). Returns the Figure.
+    The σ are those of :func:`modaluq.indicators.mac_matrix`: exact when ``modes`` carries
+    ``mode_shape_factor`` (``identify(..., keep_shape_factor=True)``), else with the shapes'
+    cross-covariance taken as 0 (said under the title). Returns the Figure.
     """
     shape = np.asarray(modes.mode_shape)
     if shape.ndim != 2:
@@ -346,7 +347,7 @@ def plot_mac(modes, ax=None, *, figsize=None, title="AutoMAC"):
     cov = getattr(modes, "mode_shape_covariance", None)
     if cov is None:
         cov = getattr(modes, "mode_covariance", None)
-    mm = mac_matrix(shape, cov)
+    mm = mac_matrix(shape, cov, getattr(modes, "mode_shape_factor", None))
     im = ax.imshow(mm.mac, vmin=0.0, vmax=1.0, cmap="Blues", origin="upper")
     with_std = np.isfinite(mm.std).all()
     small = m > MAC_CELL_SIGMA_MAX_MODES
@@ -369,6 +370,7 @@ def plot_mac(modes, ax=None, *, figsize=None, title="AutoMAC"):
     elif small:
         note = f"values only: more than {MAC_CELL_SIGMA_MAX_MODES} modes (σ: SelectedModes.mac_matrix())"
     else:
-        note = "±1σ, shapes taken as independent (cross-covariance not kept)"
+        note = ("±1σ, shapes taken as independent (cross-covariance not kept)" if mm.independent_approximation
+                else "±1σ, with the shapes' cross-covariance")
     ax.set_title(f"{title}\n{note}", fontsize=9)
     return fig

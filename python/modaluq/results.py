@@ -94,6 +94,11 @@ class Modes:
     #: and ξ, one column per block (of every setup, setup by setup, for a merge): ``covariance[:, :2, :2]``
     #: is ``U Uᵀ``. What the selection's σ of a cluster's mean is formed from (docs/uq-math.md §13.10)
     frequency_damping_factor: np.ndarray | None = None
+    #: (n_modes, 2l, n_blocks): per mode the first-order factor rows V of [Re shape; Im shape], one
+    #: column per block: ``covariance[:, 2:, 2:]`` is ``V Vᵀ``, and ``V_i V_jᵀ`` the cross-covariance
+    #: of two poles' shapes (the exact σ of an AutoMAC entry). ``None`` unless
+    #: ``keep_shape_factor=True`` (2l·n_blocks values per pole)
+    mode_shape_factor: np.ndarray | None = None
     #: (n_modes,) correlation of f and ξ from ``covariance`` (the core's; NaN where a variance is 0)
     frequency_damping_correlation: np.ndarray | None = None
     block_too_short: np.ndarray | None = None    #: (n_modes,) blocks shorter than half the decay time
@@ -125,6 +130,11 @@ class Modes:
         if has_std and rows.shape[1] == m.frequency_hz.size:
             # column i of the core's (2 n_b x n_modes) matrix is [u_f; u_xi] of mode i
             factor = rows.T.reshape(rows.shape[1], 2, rows.shape[0] // 2)
+        shape_factor = None
+        rows = m.mode_shape_factor
+        if has_std and rows.shape[1] == m.frequency_hz.size and rows.shape[1] > 0:
+            # column i of the core's (2l n_b x n_modes) matrix is mode i's 2l x n_b factor, column-major
+            shape_factor = rows.T.reshape(rows.shape[1], rows.shape[0] // (2 * l), 2 * l).transpose(0, 2, 1)
         return cls(
             order=int(m.order),
             frequency_hz=m.frequency_hz,
@@ -138,6 +148,7 @@ class Modes:
             mode_shape_std_imag=m.mode_shape_std_imag if has_std else None,
             covariance=cov,
             frequency_damping_factor=factor,
+            mode_shape_factor=shape_factor,
             frequency_damping_correlation=m.frequency_damping_correlation if has_std else None,
             block_too_short=m.block_too_short if has_std else None,
             singular_value_gap=float(m.singular_value_gap),

@@ -172,8 +172,12 @@ class SelectedModes:
     #: (``Diagram.pole_covariance``), or None without uncertainty. With ``settings.cluster_std ==
     #: "mean"`` its f and ξ entries are the mode's: the [f, ξ] block from ``frequency_std``,
     #: ``damping_std`` and ``frequency_damping_correlation``, and their covariance with the shape
-    #: the representative's correlation at those σ (the shape's own factor rows are not kept).
+    #: the representative's correlation at those σ (the mean is formed for f and ξ only).
     mode_covariance: np.ndarray | None = None
+    #: (n_modes, 2l, n_blocks) each representative pole's first-order factor of [Re shape, Im shape]
+    #: (``Diagram.pole_shape_factor``): the exact σ of the AutoMAC (:meth:`mac_matrix`). None unless
+    #: the identification kept it (``keep_shape_factor=True``)
+    mode_shape_factor: np.ndarray | None = None
     #: (n_modes,) modal phase collinearity of each shape (1: real, 0: circular) and its σ
     #: (second order, :mod:`modaluq.indicators`; NaN without ``mode_covariance``)
     mpc: np.ndarray = field(default_factory=lambda: np.zeros(0))
@@ -312,9 +316,10 @@ class SelectedModes:
         return animate_shape(self, mode, geometry, path=path, **kwargs)
 
     def mac_matrix(self):
-        """The AutoMAC of these modes with the σ of each entry (:func:`modaluq.indicators.mac_matrix`:
-        the cross-covariance of two modes is not kept and taken as 0)."""
-        return mac_matrix(self.mode_shape, self.mode_covariance)
+        """The AutoMAC of these modes with the σ of each entry (:func:`modaluq.indicators.mac_matrix`):
+        exact with ``mode_shape_factor`` (``identify(..., keep_shape_factor=True)``), else with the
+        cross-covariance of two modes taken as 0."""
+        return mac_matrix(self.mode_shape, self.mode_covariance, self.mode_shape_factor)
 
     def plot_mac(self, ax=None, **kwargs):
         """The AutoMAC with ±1σ per cell; see :func:`modaluq.plot.plot_mac`. Returns the Figure."""
@@ -441,12 +446,19 @@ def _shape_indicators(diagram, modes: SelectedModes) -> dict:
             covs = np.stack(found)
             if modes.settings.cluster_std == "mean":
                 covs = _with_cluster_std(covs, modes)
+    factors = None
+    pole_shape_factor = getattr(diagram, "pole_shape_factor", None)
+    if covs is not None and pole_shape_factor is not None:
+        found = [pole_shape_factor(int(p)) for p in modes.representative_pole]
+        if all(v is not None for v in found):
+            factors = np.stack(found)
     mpc, mpd = [], []
     for k in range(modes.n_modes):
         shape_cov = None if covs is None else shape_covariance(covs[k])
         mpc.append(modal_phase_collinearity(modes.mode_shape[:, k], shape_cov))
         mpd.append(mean_phase_deviation(modes.mode_shape[:, k], shape_cov))
-    return dict(mode_covariance=covs, mpc=np.array([m.value for m in mpc]), mpc_std=np.array([m.std for m in mpc]),
+    return dict(mode_covariance=covs, mode_shape_factor=factors,
+                mpc=np.array([m.value for m in mpc]), mpc_std=np.array([m.std for m in mpc]),
                 mpd_deg=np.array([m.value for m in mpd]), mpd_std_deg=np.array([m.std for m in mpd]))
 
 

@@ -187,6 +187,9 @@ class Settings:
     #: a campaign's merge only: block combinations per setup its noise-coupling test uses
     #: (docs/uq-math.md §13.4); 0: every block
     coupling_sketch: int = _IDENTIFY["coupling_sketch"]
+    #: keep each pole's first-order shape factor (``Modes.mode_shape_factor``): the exact σ of an
+    #: AutoMAC, for 2 l n_blocks values per pole
+    keep_shape_factor: bool = _IDENTIFY["keep_shape_factor"]
     # preprocessing (preprocess.py), which the core does not know
     frequency_range: Optional[Tuple[float, float]] = None  #: band of interest (f_low, f_high), Hz
     start: Optional[float] = None                    #: window start, s from the first sample
@@ -209,7 +212,7 @@ class Settings:
             put("n_blocks", check_integer("n_blocks", self.n_blocks))
         if self.references is not None:
             put("references", tuple(check_integers("references", self.references, minimum=0)))
-        for name in ("uncertainty", "demean", "freeze_noise", "block_correlation_correction"):
+        for name in ("uncertainty", "demean", "freeze_noise", "block_correlation_correction", "keep_shape_factor"):
             put(name, check_boolean(name, getattr(self, name)))
         put("input_rcond", check_real("input_rcond", self.input_rcond, low=0, high=1, high_open=True))
         put("threads", check_integer("threads", self.threads, minimum=1, maximum=MAX_THREADS))

@@ -245,6 +245,43 @@ TEST_CASE("each mode's factor rows of f and xi reproduce its covariance's [f, xi
 }
 
 
+TEST_CASE("the shape factor is kept only when asked and reproduces the covariance's shape block") {
+    const Sim s = simulate(3, {0, 1, 2}, 6000, 21, true, 0.2, 0.05);
+    auto o = options(s.fs, 5, 6, {2, 4, 6, 8, 10}, true);
+    const auto plain = modaluq::identify(s.y, s.u, o);
+    for (const auto& m : plain.modes) CHECK(m.mode_shape_factor.size() == 0);
+    o.keep_shape_factor = true;
+    for (bool correction : {false, true}) {
+        for (Index draws : {Index(0), Index(20)}) {
+            CAPTURE(correction);
+            CAPTURE(draws);
+            o.block_correlation_correction = correction;
+            o.bootstrap_draws = draws;  // rescales f and xi only: the shape rows stay first-order
+            const auto id = modaluq::identify(s.y, s.u, o);
+            const Index nb = id.n_blocks;
+            for (std::size_t k = 0; k < id.modes.size(); ++k) {
+                const auto& m = id.modes[k];
+                if (m.degenerate) continue;
+                const Index l = m.mode_shape.rows();
+                REQUIRE(m.mode_shape_factor.rows() == 2 * l * nb);
+                REQUIRE(m.mode_shape_factor.cols() == m.n_modes());
+                for (Index i = 0; i < m.n_modes(); ++i) {
+                    CHECK(support::shape_factor_covariance_error(m, i) <= 1e-12);
+                    const MatrixXd v = support::shape_factor(m, i);
+                    CHECK(v.row(0).norm() == doctest::Approx(m.mode_shape_std_real(0, i)).epsilon(1e-12));
+                    CHECK(v.row(l).norm() == doctest::Approx(m.mode_shape_std_imag(0, i)).epsilon(1e-12));
+                }
+                // keeping it changes nothing else
+                CHECK(m.covariance == modaluq::identify(s.y, s.u, [&] {
+                          auto p = o;
+                          p.keep_shape_factor = false;
+                          return p;
+                      }()).modes[k].covariance);
+            }
+        }
+    }
+}
+
 TEST_CASE("the block-correlation correction scales each mode by sqrt(c) from its own f and xi block terms") {
     // c by hand (docs/uq-math.md §3.1): rho_r = sum u(k) u(k+1) / sum u(k)^2, rho = mean + 1/n_b,
     // applied where |rho| > 2 / sqrt(n_b) = 1/2 here

@@ -171,6 +171,59 @@ TEST_CASE("second-order moments of MAC and MPC at their maximum equal a Monte Ca
     CHECK(mac.std == doctest::Approx(sd_mac).epsilon(0.05));
 }
 
+TEST_CASE("the std of a MAC with correlated shapes (a joint covariance) equals a Monte Carlo") {
+    // Two modes of one identification: the errors of both shapes come from one factor F (4l x k),
+    // so the joint covariance F F^T has off-diagonal blocks. Checked near the maximum (two
+    // estimates of one mode, second order) and far from it (two modes, first order).
+    const Index l = 5, k = 12;
+    std::mt19937_64 g(9);
+    std::normal_distribution<double> nd;
+    Eigen::MatrixXd f(4 * l, k);  // b's errors mostly follow a's: a strong cross term
+    for (Index i = 0; i < f.size(); ++i) f(i) = 0.01 * nd(g);
+    f.bottomRows(2 * l) = 0.9 * f.topRows(2 * l) + 0.3 * f.bottomRows(2 * l);
+    const Eigen::MatrixXd joint = f * f.transpose();
+    const Eigen::VectorXcd a = random_shape(l, 31, 0.0);
+    for (const Eigen::VectorXcd& b : {Eigen::VectorXcd(a), random_shape(l, 32, 0.1)}) {
+        const auto st = modaluq::modal_assurance_statistics(a, b, joint);
+        // the independent overload is the joint one with the cross blocks zeroed
+        Eigen::MatrixXd diag = joint;
+        diag.topRightCorner(2 * l, 2 * l).setZero();
+        diag.bottomLeftCorner(2 * l, 2 * l).setZero();
+        const auto ind = modaluq::modal_assurance_statistics(a, joint.topLeftCorner(2 * l, 2 * l), b,
+                                                             joint.bottomRightCorner(2 * l, 2 * l));
+        CHECK(ind.std == modaluq::modal_assurance_statistics(a, b, diag).std);
+        const int n = 40000;
+        double s1 = 0, s2 = 0;
+        Eigen::VectorXd e(k);
+        for (int r = 0; r < n; ++r) {
+            for (Index i = 0; i < k; ++i) e(i) = nd(g);
+            const Eigen::VectorXd d = f * e;
+            Eigen::VectorXcd pa = a, pb = b;
+            pa.real() += d.segment(0, l);
+            pa.imag() += d.segment(l, l);
+            pb.real() += d.segment(2 * l, l);
+            pb.imag() += d.segment(3 * l, l);
+            const double v = modaluq::modal_assurance(pa, pb);
+            s1 += v;
+            s2 += v * v;
+        }
+        const double mean = s1 / n, sd = std::sqrt(s2 / n - mean * mean);
+        CHECK(st.std == doctest::Approx(sd).epsilon(0.05));
+        CAPTURE(ind.std / sd);
+        // the cross term matters: 1.5x and more near the maximum, about 10 % for these two shapes
+        CHECK(std::abs(ind.std / sd - 1.0) > (b == a ? 0.5 : 0.05));
+    }
+    // the independent overload takes the shape covariances as given, as it always did
+    Eigen::MatrixXd cov_a = joint.topLeftCorner(2 * l, 2 * l);
+    cov_a(0, 1) *= 1.0 + 1e-6;
+    CHECK_NOTHROW(modaluq::modal_assurance_statistics(a, cov_a, a, cov_a));
+    Eigen::MatrixXd asym = joint;
+    asym(0, 1) += 1e-6 * joint.cwiseAbs().maxCoeff();
+    CHECK_THROWS_AS(modaluq::modal_assurance_statistics(a, a, asym), modaluq::invalid_argument);
+    CHECK_THROWS_AS(modaluq::modal_assurance_statistics(a, a, Eigen::MatrixXd(joint.topLeftCorner(4 * l - 1, 4 * l - 1))),
+                    modaluq::invalid_argument);
+}
+
 TEST_CASE("far from the maximum, the std of MAC is the first-order one") {
     const Index l = 4;
     const Eigen::VectorXcd a = random_shape(l, 21, 0.2), b = random_shape(l, 22, 0.2);

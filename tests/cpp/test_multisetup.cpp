@@ -273,6 +273,17 @@ TEST_CASE("each merged pole's factor rows of f and xi reproduce its covariance's
             REQUIRE(m.frequency_damping_factor.cols() == m.n_modes());
             REQUIRE(m.mode_shape.rows() == mc::n_global);
             for (Index i = 0; i < m.n_modes(); ++i) CHECK(support::factor_rows_covariance_error(m, i) <= 1e-12);
+            CHECK(m.mode_shape_factor.size() == 0);  // not asked for
+        }
+        // asked for: each merged pole's global-shape factor over every setup's blocks
+        auto o = c.options;
+        o.keep_shape_factor = true;
+        const auto kept = modaluq::identify_setups(c.setups, o);
+        for (const auto& m : kept.modes) {
+            if (m.degenerate) continue;
+            REQUIRE(m.mode_shape_factor.rows() == 2 * mc::n_global * nb);
+            REQUIRE(m.mode_shape_factor.cols() == m.n_modes());
+            for (Index i = 0; i < m.n_modes(); ++i) CHECK(support::shape_factor_covariance_error(m, i) <= 1e-12);
         }
         const modaluq::Poles p = modaluq::poles_of(id);
         CHECK(p.frequency_damping_factor.rows() == 2 * nb);

@@ -141,7 +141,8 @@ MEASURE = """
     peak = memory("VmHWM")
     s = r.settings
     est = estimate_cost(y.shape[0], 3, 0, block_rows=s["block_rows"], orders=s["orders"], n_blocks=s["n_blocks"] or 2,
-                        uncertainty=s["uncertainty"], threads=s["threads"], bootstrap_draws=s["bootstrap_draws"])
+                        uncertainty=s["uncertainty"], threads=s["threads"], bootstrap_draws=s["bootstrap_draws"],
+                        keep_shape_factor=s["keep_shape_factor"])
     print(json.dumps([peak - before, est.bytes]))
 """
 
@@ -153,6 +154,7 @@ MEASURE = """
     {"block_rows": 200, "orders": [20, 100, 200], "n_blocks": 10},    # high orders
     {"block_rows": 450, "orders": 60, "uncertainty": False},          # the SVD of H alone
     {"block_rows": 100, "orders": [20, 40, 60], "n_blocks": 50, "bootstrap_draws": 10},  # T_H kept, H per draw
+    {"block_rows": 100, "orders": list(range(2, 201, 2)), "n_blocks": 50, "keep_shape_factor": True},  # V per pole
 ])
 def test_estimate_is_conservative_against_measured_peak(cfg):
     """Peak RSS of the identification in a fresh process (its VmHWM less the RSS before it):

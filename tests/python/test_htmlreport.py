@@ -57,7 +57,8 @@ def big_report(tmp_path_factory):
 
     y, fs, names, geo = beam_record()
     a = modaluq.Analysis.from_arrays(y, fs=fs, output_names=names,
-                                     settings=modaluq.Settings(block_rows=8, orders=tuple(range(2, 201, 2))))
+                                     settings=modaluq.Settings(block_rows=8, orders=tuple(range(2, 201, 2)),
+                                                               keep_shape_factor=True))  # as --report
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", modaluq.ModalUQWarning)
         a.run()
@@ -85,8 +86,9 @@ def test_report_is_self_contained_and_holds_what_it_says(big_report):
         assert f"id='mode-{k + 1}-figure'" in text
     assert "MAC of the selected modes" in text and "±2σ ellipsoid axes" in text
     assert '"nticks":8' in text  # the longest axis of a 3-D shape (the short ones fewer, at least 3)
-    mm = a.selected.mac_matrix()  # the MAC's hover: each entry ± its σ
+    mm = a.selected.mac_matrix()  # the MAC's hover: each entry ± its σ, exact (the shapes' factors kept)
     assert f'"{mm.mac[0, 1]:.4f} \\u00b1 {mm.std[0, 1]:.2g}"' in text
+    assert not mm.independent_approximation and "with the shapes' cross-covariance" in text
 
 
 def test_a_30_channel_100_order_report_stays_under_10_mb(big_report):

@@ -236,3 +236,121 @@ def test_automac_std_against_the_exact_cross_covariance_of_the_oracle():
     ratios = np.array(ratios)
     assert np.all((ratios > 0.8) & (ratios < 1.25)), ratios
     assert np.max(np.abs(ratios - 1)) > 0.05, ratios
+
+
+def _exact_automac_std(phi, factor):
+    """The σ of every MAC of the columns of ``phi`` from the joint covariance of each pair's
+    factors ``factor`` (m, 2l, n_b), by the NumPy second-order reference (finite differences)."""
+    l, m = phi.shape
+    std = np.zeros((m, m))
+    for i in range(m):
+        for j in range(i + 1, m):
+            fa, fb = factor[i], factor[j]
+            joint = np.block([[fa @ fa.T, fa @ fb.T], [fb @ fa.T, fb @ fb.T]])
+            std[i, j] = std[j, i] = second_order_numpy(
+                lambda z: mac_numpy(complexify(z[:2 * l]), complexify(z[2 * l:])),
+                np.concatenate([realify(phi[:, i]), realify(phi[:, j])]), joint)[0]
+    return std
+
+
+@pytest.mark.parametrize("io", [False, True])
+def test_kept_shape_factor_equals_the_oracle_and_gives_the_exact_automac(io):
+    # keep_shape_factor=True: each pole's shape factor is the oracle's factor rows (2..) to 1e-8,
+    # V V' its covariance's shape block, and the AutoMAC's σ the exact second-order σ with the
+    # cross-covariance V_i V_j' (the NumPy reference above), not the independent approximation.
+    import oracle
+    from modaluq.indicators import mac_matrix
+
+    sim = modaluq.simulate(20000, seed=1)
+    u = sim.u if io else None
+    kw = dict(fs=sim.fs, block_rows=10, orders=[12], n_blocks=50)
+    res = oracle.identify_factor(sim.y, u, **kw)[12]
+    r = modaluq.identify(sim.y, u, keep_shape_factor=True, **kw)
+    m = r.at_order(12)
+    v = m.mode_shape_factor
+    l = m.mode_shape.shape[0]
+    assert v.shape == (m.n_modes, 2 * l, r.n_blocks)
+    np.testing.assert_allclose(v, res["factor"][:, 2:], rtol=0, atol=1e-8 * np.abs(res["factor"][:, 2:]).max())
+    np.testing.assert_allclose(np.einsum("mik,mjk->mij", v, v), m.covariance[:, 2:, 2:], rtol=0,
+                               atol=1e-12 * np.abs(m.covariance[:, 2:, 2:]).max())
+    # not kept unless asked
+    assert modaluq.identify(sim.y, u, **kw).at_order(12).mode_shape_factor is None
+    exact = _exact_automac_std(m.mode_shape, v)
+    mm = mac_matrix(m.mode_shape, m.covariance, v)
+    assert not mm.independent_approximation
+    off = ~np.eye(m.n_modes, dtype=bool)
+    np.testing.assert_allclose(mm.std[off], exact[off], rtol=2e-3)
+    assert np.all(np.diag(mm.std) == 0)
+    # the independent approximation differs (the cross term is not negligible here)
+    approx = mac_matrix(m.mode_shape, m.covariance)
+    assert approx.independent_approximation
+    assert np.max(np.abs(approx.std[off] / exact[off] - 1)) > 0.05
+
+
+def _check_factors_against_covariances(sel):
+    # V Vᵀ is the selected mode's shape covariance and V's row norms its shape σ
+    v, l = sel.mode_shape_factor, sel.mode_shape.shape[0]
+    assert v.shape[:2] == (sel.n_modes, 2 * l)
+    c = sel.mode_covariance[:, 2:, 2:]
+    np.testing.assert_allclose(np.einsum("mik,mjk->mij", v, v), c, rtol=0, atol=1e-12 * np.abs(c).max())
+    np.testing.assert_allclose(np.linalg.norm(v[:, :l], axis=2).T, sel.mode_shape_std_real, rtol=1e-10, atol=1e-15)
+
+
+@pytest.mark.parametrize("cluster_std", ["median", "mean"])
+def test_selected_modes_carry_their_representatives_shape_factors(cluster_std):
+    sim = modaluq.simulate(20000, seed=2)
+    r = modaluq.identify(sim.y, fs=sim.fs, block_rows=10, orders=range(2, 25, 2), n_blocks=50,
+                         keep_shape_factor=True)
+    diagram = r.stabilization_diagram()
+    sel = modaluq.select_modes(diagram, cluster_std=cluster_std)
+    assert sel.n_modes >= 4 and sel.mode_shape_factor is not None
+    _check_factors_against_covariances(sel)
+    for k, p in enumerate(sel.representative_pole):
+        np.testing.assert_array_equal(sel.mode_shape_factor[k], diagram.pole_shape_factor(int(p)))
+    mm = sel.mac_matrix()
+    assert not mm.independent_approximation
+    exact = _exact_automac_std(sel.mode_shape, sel.mode_shape_factor)
+    off = ~np.eye(sel.n_modes, dtype=bool)
+    np.testing.assert_allclose(mm.std[off], exact[off], rtol=2e-3)
+    # without the factor: the approximation, said by the flag
+    plain = modaluq.identify(sim.y, fs=sim.fs, block_rows=10, orders=range(2, 25, 2), n_blocks=50)
+    psel = plain.select_modes()
+    assert psel.mode_shape_factor is None and psel.mac_matrix().independent_approximation
+
+
+def test_mac_matrix_refuses_bad_factors():
+    from modaluq.indicators import mac_matrix
+
+    phi = np.array([[1.0, 0.2], [0.5, -1.0], [0.1, 0.3]], complex)
+    good = np.full((2, 6, 4), 1e-3)
+    assert mac_matrix(phi, factors=good).std.shape == (2, 2)
+    with pytest.raises(ValueError, match="factors"):
+        mac_matrix(phi, factors=good[:, :5])
+    with pytest.raises(ValueError, match="factors"):
+        mac_matrix(phi, factors=good[:1])
+    bad = good.copy()
+    bad[0, 0, 0] = np.nan
+    with pytest.raises(ValueError, match="factors must be finite"):
+        mac_matrix(phi, factors=bad)
+
+
+def test_shape_factors_of_a_campaign_and_of_orders_without_modes():
+    # a campaign's merge keeps the global shapes' factors over every setup's blocks; an order above
+    # the rank of H has no modes and no factor, the others have theirs
+    from modaluq.simulate.campaign import simulate_campaign
+
+    camp = simulate_campaign(4, durations=(120.0, 140.0, 110.0, 130.0, 150.0, 120.0))
+    res = modaluq.identify_setups(camp.frames(), fs=camp.fs, references=["L3", "R8"], block_rows=15,
+                                  orders=list(range(2, 25, 2)), n_blocks=12, keep_shape_factor=True)
+    m = res.at_order(12)
+    assert m.mode_shape_factor.shape == (m.n_modes, 2 * 24, 12 * 6)
+    sel = res.select_modes()
+    _check_factors_against_covariances(sel)
+    # a sine: H of numerical rank 2, orders 4 and 6 without modes (test_reliability_core.py)
+    t = np.arange(6000) / 50.0
+    noise = 1e-9 * np.random.default_rng(0).standard_normal((6000, 3))
+    y = np.sin(2 * np.pi * 3.0 * t)[:, None] * np.ones((1, 3)) + noise
+    with pytest.warns(modaluq.ModalUQWarning, match="use orders <= 2"):
+        r = modaluq.identify(y, fs=50.0, block_rows=10, orders=[2, 4, 6], n_blocks=10, keep_shape_factor=True)
+    assert r.at_order(2).mode_shape_factor.shape == (1, 6, 10)
+    assert all(r.at_order(n).degenerate and r.at_order(n).mode_shape_factor is None for n in (4, 6))

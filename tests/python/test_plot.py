@@ -8,6 +8,7 @@ import pytest
 
 import modaluq
 from modaluq import PoleStatus
+from modaluq.indicators import mac_matrix
 from modaluq.spectrum import output_spectrum_singular_values
 
 matplotlib = pytest.importorskip("matplotlib")
@@ -283,3 +284,15 @@ def test_automac_draws_each_mac_with_its_sigma(small_chain):
     bare = types.SimpleNamespace(mode_shape=sel.mode_shape, frequency_hz=sel.frequency_hz)
     ax = plot_mac(bare).axes[0]
     assert "no σ" in ax.get_title() and not any("±" in t.get_text() for t in ax.texts)
+    # with the shapes' factors (keep_shape_factor=True): the exact σ, said
+    def factor(c):  # any V with V Vᵀ = the shape covariance
+        w, q = np.linalg.eigh(c[2:, 2:])
+        return q * np.sqrt(np.clip(w, 0, None))
+
+    factors = np.stack([factor(c) for c in sel.mode_covariance])
+    exact = types.SimpleNamespace(mode_shape=sel.mode_shape, frequency_hz=sel.frequency_hz,
+                                  mode_covariance=sel.mode_covariance, mode_shape_factor=factors)
+    ax = plot_mac(exact).axes[0]
+    assert "with the shapes' cross-covariance" in ax.get_title()
+    mm = mac_matrix(sel.mode_shape, factors=factors)
+    assert any(t.get_text() == f"{mm.mac[0, 1]:.3f}\n±{mm.std[0, 1]:.2g}" for t in ax.texts)

@@ -99,14 +99,14 @@ def test_to_dict_and_record_are_unchanged():
         "block_rows": None, "past_block_rows": None, "orders": None, "n_blocks": None, "references": [0, 2],
         "uncertainty": True, "demean": True, "input_rcond": 1e-10, "threads": 1, "freeze_noise": True,
         "noise_coupling_limit": 20.0, "block_correlation_correction": False, "bootstrap_draws": 0, "coupling_sketch": 4,
-        "frequency_range": [1, 2], "start": None, "stop": None, "decimate": None,
+        "keep_shape_factor": False, "frequency_range": [1, 2], "start": None, "stop": None, "decimate": None,
         "detrend": None, "highpass": None}
     record = Settings(block_rows=10, orders=(2, 4), n_blocks=20, uncertainty=False).record(50.0, 3)
     assert list(record.items()) == [
         ("fs", 50.0), ("block_rows", 10), ("past_block_rows", 10), ("orders", [2, 4]), ("n_blocks", None),
         ("references", [0, 1, 2]), ("uncertainty", False), ("demean", True), ("input_rcond", 1e-10),
         ("threads", 1), ("freeze_noise", True), ("noise_coupling_limit", 20.0), ("block_correlation_correction", False),
-        ("bootstrap_draws", 0), ("coupling_sketch", 4)]
+        ("bootstrap_draws", 0), ("coupling_sketch", 4), ("keep_shape_factor", False)]
 
 
 # --------------------------------------------------------------------------- the command line

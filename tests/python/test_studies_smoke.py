@@ -87,7 +87,8 @@ def test_indicators_mc(capsys):
 
 def test_automac_mc(capsys):
     out = _module("automac_mc").main(n_records=2, n_samples=6000)
-    assert set(out) == {"output-only", "input/output"}
+    assert set(out) == {f"{kind}, {call}" for kind in ("output-only", "input/output")
+                        for call in ("true order", "engineer's call", "engineer's call, lowest")}
     assert "| pair | MAC | σ_MC | approx. / σ_MC | exact / σ_MC |" in capsys.readouterr().out
 
 

@@ -144,6 +144,17 @@ inline void require_shape(const char* name, const Eigen::VectorXcd& phi) {
     require(phi.squaredNorm() > 0.0, name, " must not be zero");
 }
 
+/// MAC of a and b with its second-order statistics for the joint covariance of
+/// [Re a; Im a; Re b; Im b] (checked by the callers).
+inline IndicatorStatistics mac_statistics(const Eigen::VectorXcd& a, const Eigen::VectorXcd& b,
+                                          const Eigen::MatrixXd& joint) {
+    Eigen::VectorXd z(2 * (a.size() + b.size())), g;  // [Re a; Im a; Re b; Im b]
+    z << realify(a), realify(b);
+    Eigen::MatrixXd h;
+    const double v = mac_derivatives(z, &g, &h);
+    return second_order(v, g, h, joint);
+}
+
 }  // namespace detail
 
 /// Modal phase collinearity of a shape: 1 for a real (monophase) shape, 0 for a circular one.
@@ -175,10 +186,27 @@ inline double modal_assurance(const Eigen::VectorXcd& a, const Eigen::VectorXcd&
     return detail::mac_derivatives(z, nullptr, nullptr);
 }
 
+/// MAC with its std from the joint covariance `joint` (4l x 4l) of [Re a; Im a; Re b; Im b]: for
+/// two modes of one identification, whose shapes share the data, the off-diagonal blocks are
+/// their cross-covariance V_a V_b^T (Modes::mode_shape_factor).
+inline IndicatorStatistics modal_assurance_statistics(const Eigen::VectorXcd& a, const Eigen::VectorXcd& b,
+                                                      const Eigen::MatrixXd& joint) {
+    detail::require_shape("a", a);
+    detail::require_shape("b", b);
+    const Index l = a.size();
+    detail::require(b.size() == l, "the shapes must have equal length, got ", l, " and ", b.size());
+    detail::require(joint.rows() == 4 * l && joint.cols() == 4 * l, "joint must be the ", 4 * l, " x ", 4 * l,
+                    " covariance of [Re a; Im a; Re b; Im b], got ", joint.rows(), " x ", joint.cols());
+    detail::require(joint.allFinite(), "joint must be finite");
+    // relative: a covariance formed as V V^T is symmetric to rounding, whatever its scale
+    detail::require((joint - joint.transpose()).cwiseAbs().maxCoeff() <= 1e-10 * joint.cwiseAbs().maxCoeff(),
+                    "joint must be symmetric");
+    return detail::mac_statistics(a, b, joint);
+}
+
 /// MAC with its std, for shapes estimated independently (two records, two setups, or an
-/// estimate against a fixed reference: pass a zero covariance for that one). Two modes of one
-/// identification are correlated, and their cross-covariance is not kept: the std of such a MAC
-/// computed here treats them as independent.
+/// estimate against a fixed reference: pass a zero covariance for that one). For two modes of
+/// one identification, which are correlated, use the overload with their joint covariance.
 inline IndicatorStatistics modal_assurance_statistics(const Eigen::VectorXcd& a, const Eigen::MatrixXd& cov_a,
                                                       const Eigen::VectorXcd& b, const Eigen::MatrixXd& cov_b) {
     detail::require_shape("a", a);
@@ -190,11 +218,7 @@ inline IndicatorStatistics modal_assurance_statistics(const Eigen::VectorXcd& a,
     Eigen::MatrixXd joint = Eigen::MatrixXd::Zero(4 * l, 4 * l);
     joint.topLeftCorner(2 * l, 2 * l) = cov_a;
     joint.bottomRightCorner(2 * l, 2 * l) = cov_b;
-    Eigen::VectorXd z(4 * l), g;
-    z << detail::realify(a), detail::realify(b);
-    Eigen::MatrixXd h;
-    const double v = detail::mac_derivatives(z, &g, &h);
-    return detail::second_order(v, g, h, joint);
+    return detail::mac_statistics(a, b, joint);
 }
 
 /// Mean phase deviation (Reynders et al. 2012) in degrees: the |shape|-weighted mean angle between

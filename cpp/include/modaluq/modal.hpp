@@ -43,6 +43,12 @@ struct Modes {
     /// What the selection's sigma of a cluster's mean is formed from (ClusteringOptions::cluster_std,
     /// docs/uq-math.md §13.10): 2 n_b doubles per mode.
     Eigen::MatrixXd frequency_damping_factor;
+    /// (2 l n_b) x n_modes, empty unless IdentifyOptions::keep_shape_factor: column i is mode i's
+    /// first-order factor V of [Re shape; Im shape] (2l x n_b, stored column-major, so block k's
+    /// 2l entries are contiguous): the shape rows of the U whose U U^T is `covariance`. Two poles of
+    /// one identification share the blocks, so V_i V_j^T is the cross-covariance of their shapes,
+    /// which the sigma of their MAC needs (modal_assurance_statistics with a joint covariance).
+    Eigen::MatrixXd mode_shape_factor;
     /// Per mode, the correlation of f and xi, cov(f, xi) / sqrt(var f var xi) from `covariance`
     /// (NaN where a variance is 0).
     Eigen::VectorXd frequency_damping_correlation;

@@ -632,7 +632,7 @@ inline SetupsIdentification identify_setups(const std::vector<SetupData>& setups
                 const bool frozen = std::any_of(sg.begin(), sg.end(), [&](const detail::SetupGamma& g) {
                     return g.freezes() && n > g.k_star;
                 });
-                detail::resize_mode_uncertainty(modes, l_g, nb_total);
+                detail::resize_mode_uncertainty(modes, l_g, nb_total, options.keep_shape_factor);
                 Eigen::MatrixXcd dlam;
                 std::vector<Eigen::MatrixXcd> dshape;
                 std::vector<Eigen::MatrixXd> ut_f;

@@ -33,8 +33,9 @@ namespace modaluq {
 namespace detail {
 
 /// Size the uncertainty fields of `modes` (its n_modes modes, l outputs, n_b blocks); the
-/// noise-coupling fields start at rho = 1, not flagged.
-inline void resize_mode_uncertainty(Modes& modes, Index l, Index nb) {
+/// noise-coupling fields start at rho = 1, not flagged. The shape factor is sized (and so kept
+/// by set_mode_uncertainty) only with `keep_shape_factor`.
+inline void resize_mode_uncertainty(Modes& modes, Index l, Index nb, bool keep_shape_factor = false) {
     const Index nm = modes.n_modes(), np = 2 + 2 * l;
     modes.frequency_std.resize(nm);
     modes.damping_std.resize(nm);
@@ -42,6 +43,7 @@ inline void resize_mode_uncertainty(Modes& modes, Index l, Index nb) {
     modes.mode_shape_std_imag.resize(l, nm);
     modes.covariance.resize(np * np, nm);
     modes.frequency_damping_factor.resize(2 * nb, nm);
+    modes.mode_shape_factor.resize(keep_shape_factor ? 2 * l * nb : 0, keep_shape_factor ? nm : 0);
     modes.block_too_short.resize(nm);
     modes.frequency_damping_correlation.resize(nm);
     modes.noise_coupling = Eigen::VectorXd::Ones(nm);
@@ -74,14 +76,17 @@ inline double block_correlation_scale(const Eigen::Ref<const Eigen::MatrixXd>& u
 }
 
 /// Mode i's uncertainty from its factor `ut` ((2 + 2l) x n_b, rows f, xi, Re shape, Im shape,
-/// stage 5): the covariance U U^T, the std, the f-xi correlation, the factor rows of f and xi, and
-/// the block-length flag (blocks of block_seconds).
+/// stage 5): the covariance U U^T, the std, the f-xi correlation, the factor rows of f and xi (and
+/// of the shape, where resize_mode_uncertainty kept room for them), and the block-length flag
+/// (blocks of block_seconds).
 inline void set_mode_uncertainty(Modes& modes, Index i, const Eigen::MatrixXd& ut, double block_seconds) {
     const Index np = ut.rows(), l = (np - 2) / 2, nb = ut.cols();
     const Eigen::MatrixXd cov = ut * ut.transpose();
     modes.covariance.col(i) = Eigen::Map<const Eigen::VectorXd>(cov.data(), np * np);
     modes.frequency_damping_factor.col(i).head(nb) = ut.row(0).transpose();
     modes.frequency_damping_factor.col(i).tail(nb) = ut.row(1).transpose();
+    if (modes.mode_shape_factor.cols() == modes.n_modes())
+        Eigen::Map<Eigen::MatrixXd>(modes.mode_shape_factor.col(i).data(), 2 * l, nb) = ut.bottomRows(2 * l);
     const Eigen::VectorXd sd = cov.diagonal().cwiseMax(0.0).cwiseSqrt();
     modes.frequency_std(i) = sd(0);
     modes.damping_std(i) = sd(1);
@@ -115,10 +120,13 @@ public:
     /// @param b    columns of H
     /// @param threads  threads for the per-block work (results do not depend on it)
     /// @param block_correlation_correction  scale each mode's factor by sqrt(c) (docs/uq-math.md §3.1)
+    /// @param keep_shape_factor  keep each mode's shape factor (Modes::mode_shape_factor)
     UncertaintyPropagator(const Realization& re, const Eigen::MatrixXd& t_h, Index b, Index threads = 1,
-                          NoiseOptions noise = {}, bool block_correlation_correction = false)
+                          NoiseOptions noise = {}, bool block_correlation_correction = false,
+                          bool keep_shape_factor = false)
         : l_(re.n_outputs()), singular_values_(re.singular_values()), gamma_up_r_(re.gamma_up_r()),
-          nb_(t_h.cols()), noise_(noise), block_correction_(block_correlation_correction) {
+          nb_(t_h.cols()), noise_(noise), block_correction_(block_correlation_correction),
+          keep_shape_factor_(keep_shape_factor) {
         const Index a = re.U().rows(), n = re.max_order(), l = re.n_outputs();
         const Index n_sigma = std::min<Index>(n + 1, re.singular_values().size());
         detail::require(t_h.rows() == a * b, "T_H must have a*b rows");
@@ -148,7 +156,7 @@ public:
                double block_seconds) const {
         using detail::cd;
         const Index n = modes.order, nm = modes.n_modes();
-        detail::resize_mode_uncertainty(modes, l_, nb_);
+        detail::resize_mode_uncertainty(modes, l_, nb_, keep_shape_factor_);
 
         // Singular-value gap at this order, judged against its own uncertainty. Only a cut
         // between significant singular values matters: one in the noise is frozen (§5.5).
@@ -202,6 +210,7 @@ private:
     Index nb_;
     NoiseOptions noise_;
     bool block_correction_ = false;
+    bool keep_shape_factor_ = false;
     detail::NoiseFloor floor_;
     Eigen::MatrixXd dsigma_;  ///< d sigma_j per block, j < n_max + 1
     detail::BlockQ q_;        ///< Q1..Q4 of every block at n_max

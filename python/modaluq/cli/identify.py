@@ -193,6 +193,8 @@ def run(args) -> int:
         except (OSError, ValueError) as exc:
             raise CliError(f"--geometry {args.geometry}: {exc}") from None
     settings, criteria, clustering = analysis_settings(args)
+    if args.report:  # the report's AutoMAC gives the exact sigma, which needs the shapes' factors
+        settings = settings.replace(keep_shape_factor=True)
     if args.orders is not None:
         _order_spec(args.orders)  # syntax, before the data are loaded; the bound needs them
     read_options = parse_read_options(args.read_option)
@@ -310,6 +312,8 @@ def run_setups(args, t_start: float) -> int:
     keywords = {name: getattr(settings, name) for name in SETTINGS_OPTIONS if getattr(args, name) is not None}
     if args.no_uncertainty:
         keywords["uncertainty"] = False
+    if args.report:  # the report's AutoMAC gives the exact sigma, which needs the shapes' factors
+        keywords["keep_shape_factor"] = True
     if args.orders is not None:
         keywords["orders"] = parse_orders(args.orders)
     options = set(vars(args))
@@ -405,7 +409,8 @@ def register(subparsers) -> argparse.ArgumentParser:
                         "add every node's displacement with its sigma")
     g.add_argument("--report", metavar="HTML", default=None,
                    help="write one self-contained interactive HTML report (stabilization diagram with sigma, "
-                        "modes, MAC, the modes animated on --geometry in 3-D); needs plotly")
+                        "modes, MAC with the sigma of each entry including the shapes' cross-covariance, the modes "
+                        "animated on --geometry in 3-D); needs plotly")
     g.add_argument("--overwrite", action="store_true",
                    help="replace existing output files (the input file is never overwritten)")
     g.add_argument("--no-progress", action="store_true", help="no progress display on stderr")

@@ -172,6 +172,20 @@ inline double factor_rows_covariance_error(const modaluq::Modes& m, Index i) {
     return (u * u.transpose() - cov.topLeftCorner(2, 2)).cwiseAbs().maxCoeff() / std::sqrt(cov(0, 0) * cov(1, 1));
 }
 
+/// Mode i's shape factor V (2l x n_b) of Modes::mode_shape_factor.
+inline MatrixXd shape_factor(const modaluq::Modes& m, Index i) {
+    const Index l2 = 2 * m.mode_shape.rows();
+    return Eigen::Map<const MatrixXd>(m.mode_shape_factor.col(i).data(), l2, m.mode_shape_factor.rows() / l2);
+}
+
+/// max |V V^T - shape block of mode i's covariance| over that block's largest entry.
+inline double shape_factor_covariance_error(const modaluq::Modes& m, Index i) {
+    const Index l = m.mode_shape.rows(), np = 2 + 2 * l;
+    const Eigen::Map<const MatrixXd> cov(m.covariance.col(i).data(), np, np);
+    const MatrixXd v = shape_factor(m, i), block = cov.bottomRightCorner(2 * l, 2 * l);
+    return (v * v.transpose() - block).cwiseAbs().maxCoeff() / std::max(block.cwiseAbs().maxCoeff(), 1e-300);
+}
+
 inline MatrixXd kron(const MatrixXd& A, const MatrixXd& B) {
     MatrixXd K(A.rows() * B.rows(), A.cols() * B.cols());
     for (Index i = 0; i < A.rows(); ++i)

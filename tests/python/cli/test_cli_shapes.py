@@ -51,6 +51,7 @@ def test_identify_with_geometry_report_and_uff(record, tmp_path, capsys):
         assert f"wrote {tmp_path / name}" in out
     html = (tmp_path / "r.html").read_text(encoding="utf-8")
     assert "three-mass chain" in html and "plotly.js v" in html
+    assert "with the shapes' cross-covariance" in html  # --report keeps the shape factors: the exact AutoMAC σ
     back = exchange.read_uff_modes(tmp_path / "modes.uff")
     assert back.n_modes >= 2 and back.geometry.n_nodes == 4
     a = modaluq.Analysis.from_file(path, settings=modaluq.Settings(block_rows=15, orders=tuple(range(2, 31, 2))))
