@@ -31,6 +31,11 @@ short halves and broad modes. That biases RMS z_f down and the share within ±1.
 therefore also give the pairs with ``z_f_cap`` >= 3 (a condition on σ, not on z), and
 ``--tolerance`` reruns the pairing wider.
 
+The shapes are checked alike (``z_mac``, ``mac_p_value``: the "same mode" test of the two halves'
+shapes with both shapes' covariances, ``modaluq.indicators.mac_test``): RMS z_MAC ≈ 1 and about
+5 % of the pairs rejected at 5 % if the shapes' σ are right. The pairing's MAC >= 0.8 truncates
+z_MAC as the tolerance truncates z_f.
+
 Usage: OPENBLAS_NUM_THREADS=1 python studies/split_halves_pool.py [DATA_DIR] [--out pairs.csv]
 (default ../shared/data; about 1 min on one core). docs/validation.md quotes its table.
 """
@@ -83,7 +88,7 @@ RECORDS = {
 
 COLUMNS = ("group", "record", "n_windows", "window", "t0_s", "t1_s", "half_s", "block_rows", "n_blocks", "orders",
            "f1_hz", "f2_hz", "sigma_f1_hz", "sigma_f2_hz", "xi1", "xi2", "sigma_xi1", "sigma_xi2",
-           "z_f", "z_xi", "z_f_cap", "mac", "harmonic", "rms_ratio")
+           "z_f", "z_xi", "z_f_cap", "mac", "z_mac", "mac_p_value", "harmonic", "rms_ratio")
 
 
 def pairs_of_record(name, data, levels=LEVELS, tolerance=0.02, representative="median"):
@@ -118,14 +123,22 @@ def pairs_of_record(name, data, levels=LEVELS, tolerance=0.02, representative="m
                     orders=check.settings["orders"], f1_hz=f[m, 0], f2_hz=f[m, 1],
                     sigma_f1_hz=sf[m, 0], sigma_f2_hz=sf[m, 1], xi1=x[m, 0], xi2=x[m, 1],
                     sigma_xi1=sx[m, 0], sigma_xi2=sx[m, 1], z_f=check.z_frequency[m], z_xi=check.z_damping[m],
-                    z_f_cap=tolerance * f[m].max() / np.hypot(*sf[m]), mac=check.mac[m],
+                    z_f_cap=tolerance * f[m].max() / np.hypot(*sf[m]), mac=check.mac[m], z_mac=check.z_mac[m],
+                    mac_p_value=check.mac_p_value[m],
                     harmonic=bool(harmonic[m]), rms_ratio=ratio))
     return rows, failed
 
 
 def stats(rows):
-    """Pairs, RMS z, share within ±1.96 and the largest |z|, of f and of ξ."""
+    """Pairs, RMS z, share within ±1.96 and the largest |z|, of f and of ξ; RMS z_MAC and the share of
+    pairs whose "same mode" test of the shapes rejects at 5 %."""
     out = {"pairs": len(rows)}
+    z = np.array([r["z_mac"] for r in rows], float)
+    z = z[np.isfinite(z)]
+    out["rms z_mac"] = np.sqrt(np.mean(z ** 2)) if z.size else np.nan
+    p = np.array([r["mac_p_value"] for r in rows], float)
+    p = p[np.isfinite(p)]
+    out["rejected"] = 100 * np.mean(p < 0.05) if p.size else np.nan
     for key in ("z_f", "z_xi"):
         z = np.array([r[key] for r in rows], float)
         z = z[np.isfinite(z)]
@@ -138,14 +151,16 @@ def stats(rows):
 def table_line(label, rows):
     s = stats(rows)
     if not s["pairs"]:
-        return f"| {label} | 0 | — | — | — |"
+        return f"| {label} | 0 | — | — | — | — |"
     return (f"| {label} | {s['pairs']} | {s['rms z_f']:.2f}, {s['rms z_xi']:.2f} | "
-            f"{s['within z_f']:.0f} %, {s['within z_xi']:.0f} % | {s['max z_f']:.1f}, {s['max z_xi']:.1f} |")
+            f"{s['within z_f']:.0f} %, {s['within z_xi']:.0f} % | {s['max z_f']:.1f}, {s['max z_xi']:.1f} | "
+            f"{s['rms z_mac']:.2f}, {s['rejected']:.0f} % |")
 
 
 def print_tables(rows, failed, levels=LEVELS):
-    print("| rows | pairs | RMS z f, ξ | within ±1.96 f, ξ | largest abs(z) f, ξ |")
-    print("|---|---|---|---|---|")
+    print("| rows | pairs | RMS z f, ξ | within ±1.96 f, ξ | largest abs(z) f, ξ | shapes: RMS z_MAC, same mode "
+          "rejected at 5 % |")
+    print("|---|---|---|---|---|---|")
     for group in ("measured", "simulated", "earthquake"):
         names = [n for n in RECORDS if RECORDS[n][0] == group and any(r["record"] == n for r in rows)]
         for name in names:

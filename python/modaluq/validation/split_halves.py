@@ -3,7 +3,10 @@ of one record identified alike, and each mode's two estimates compared against t
 
 If the σ are right, z = (x₁ − x₂) / √(σ₁² + σ₂²) is standard normal for every mode found in both
 halves (the halves are independent records of the same structure): over many modes its RMS is
-about 1 and 95 % of the z lie within ±1.96. No simulation is needed, so it checks σ on the
+about 1 and 95 % of the z lie within ±1.96. The shapes are checked alike: under "same mode" the
+loss 1 − MAC of the two halves' shapes has a mean and σ from both shapes' covariances
+(:func:`modaluq.indicators.mac_test`), so z_MAC = (1 − MAC − mean) / σ has RMS about 1 and the
+"same mode" test rejects about 5 % of the pairs at 5 % if the shapes' σ are right. No simulation is needed, so it checks σ on the
 user's own record. A structure that changes between the halves (temperature, traffic mass, a
 strong-motion half and a coda) gives |z| > 1 that is not σ's fault: choose a stationary record.
 
@@ -25,6 +28,7 @@ import numpy as np
 
 from ..analysis import Analysis
 from ..checks import check_real
+from ..indicators import mac_test, shape_covariance
 from ..stabilization import modal_assurance_criterion
 
 __all__ = ["SplitHalves", "split_halves"]
@@ -50,6 +54,17 @@ class SplitHalves:
     halves_s: tuple
     settings: dict
     unmatched_hz: tuple
+    #: (n_pairs,) z_MAC = (1 − MAC − E[1 − MAC]) / σ(1 − MAC) under "same mode", from both shapes'
+    #: covariances (:func:`modaluq.indicators.mac_test`); NaN where a covariance is missing
+    z_mac: np.ndarray = None
+    #: (n_pairs,) p-value of the "same mode" test of the two shapes (NaN where not defined)
+    mac_p_value: np.ndarray = None
+
+    def __post_init__(self):
+        nan = np.full(len(self.mac), np.nan)
+        for name in ("z_mac", "mac_p_value"):
+            if getattr(self, name) is None:
+                object.__setattr__(self, name, nan.copy())
 
     @property
     def z_frequency(self) -> np.ndarray:
@@ -60,13 +75,19 @@ class SplitHalves:
         return _z(self.damping_ratio, self.damping_std)
 
     def summary(self) -> dict:
-        """``n_pairs``; ``rms_z_frequency``, ``rms_z_damping`` (≈ 1 if σ is right); the share of
-        |z| ≤ 1.96, ``within_frequency`` and ``within_damping`` (≈ 0.95); NaN without pairs."""
+        """``n_pairs``; ``rms_z_frequency``, ``rms_z_damping``, ``rms_z_mac`` (≈ 1 if σ is right); the
+        share of |z| ≤ 1.96, ``within_frequency`` and ``within_damping`` (≈ 0.95); the share of
+        pairs whose "same mode" test rejects at 5 %, ``same_mode_rejected`` (≈ 0.05); NaN without
+        pairs."""
         out = {"n_pairs": int(len(self.mac))}
         for name, z in (("frequency", self.z_frequency), ("damping", self.z_damping)):
             z = z[np.isfinite(z)]
             out[f"rms_z_{name}"] = float(np.sqrt(np.mean(z ** 2))) if z.size else float("nan")
             out[f"within_{name}"] = float(np.mean(np.abs(z) <= Z_95)) if z.size else float("nan")
+        z = self.z_mac[np.isfinite(self.z_mac)]
+        out["rms_z_mac"] = float(np.sqrt(np.mean(z ** 2))) if z.size else float("nan")
+        p = self.mac_p_value[np.isfinite(self.mac_p_value)]
+        out["same_mode_rejected"] = float(np.mean(p < 0.05)) if p.size else float("nan")
         return out
 
     def to_dataframe(self):
@@ -77,7 +98,8 @@ class SplitHalves:
         for name, v in (("frequency_hz", self.frequency_hz), ("frequency_std", self.frequency_std),
                         ("damping_ratio", self.damping_ratio), ("damping_std", self.damping_std)):
             cols[f"{name}_1"], cols[f"{name}_2"] = v[:, 0], v[:, 1]
-        cols.update(z_frequency=self.z_frequency, z_damping=self.z_damping, mac=self.mac)
+        cols.update(z_frequency=self.z_frequency, z_damping=self.z_damping, mac=self.mac, z_mac=self.z_mac,
+                    mac_p_value=self.mac_p_value)
         return pd.DataFrame(cols)
 
     def report(self) -> str:
@@ -86,18 +108,21 @@ class SplitHalves:
         (a0, a1), (b0, b1) = self.halves_s
         lines = [f"## Split halves: {a0:g}-{a1:g} s against {b0:g}-{b1:g} s", "",
                  "Settings of both halves: " + ", ".join(f"{k} {v}" for k, v in self.settings.items()), "",
-                 "| f₁ (Hz) | f₂ (Hz) | σ_f₁, σ_f₂ (Hz) | z_f | ξ₁ (%) | ξ₂ (%) | σ_ξ₁, σ_ξ₂ (%) | z_ξ | MAC |",
-                 "|---|---|---|---|---|---|---|---|---|"]
+                 "| f₁ (Hz) | f₂ (Hz) | σ_f₁, σ_f₂ (Hz) | z_f | ξ₁ (%) | ξ₂ (%) | σ_ξ₁, σ_ξ₂ (%) | z_ξ | MAC | z_MAC "
+                 "| p (same mode) |",
+                 "|---|---|---|---|---|---|---|---|---|---|---|"]
         zf, zx = self.z_frequency, self.z_damping
         for k in range(s["n_pairs"]):
             f, sf, x, sx = self.frequency_hz[k], self.frequency_std[k], self.damping_ratio[k], self.damping_std[k]
             lines.append(f"| {f[0]:.4f} | {f[1]:.4f} | {sf[0]:.2g}, {sf[1]:.2g} | {zf[k]:+.2f} | "
                          f"{100 * x[0]:.2f} | {100 * x[1]:.2f} | {100 * sx[0]:.2g}, {100 * sx[1]:.2g} | "
-                         f"{zx[k]:+.2f} | {self.mac[k]:.3f} |")
+                         f"{zx[k]:+.2f} | {self.mac[k]:.5f} | {self.z_mac[k]:+.2f} | {self.mac_p_value[k]:.2g} |")
         if s["n_pairs"]:
             lines += ["", f"{s['n_pairs']} modes in both halves: RMS z {s['rms_z_frequency']:.2f} (f), "
                           f"{s['rms_z_damping']:.2f} (ξ); within ±1.96: {100 * s['within_frequency']:.0f} % (f), "
-                          f"{100 * s['within_damping']:.0f} % (ξ). If σ is right: RMS ≈ 1, about 95 % within."]
+                          f"{100 * s['within_damping']:.0f} % (ξ). Shapes: RMS z_MAC {s['rms_z_mac']:.2f}, \"same "
+                          f"mode\" rejected at 5 % for {100 * s['same_mode_rejected']:.0f} % of the pairs. If σ is "
+                          "right: RMS ≈ 1, about 95 % within, about 5 % rejected."]
         else:
             lines += ["", "No mode was found in both halves (within the frequency difference and MAC asked): "
                           "nothing to compare."]
@@ -156,6 +181,7 @@ def split_halves(analysis: Analysis, *, max_frequency_difference: float = 0.02, 
     def both(name):
         return np.column_stack([np.asarray(getattr(s1, name), float)[i1], np.asarray(getattr(s2, name), float)[i2]])
 
+    tests = [_shape_test(s1, a, s2, b) for a, b in pairs]
     used = runs[0].result.settings
     return SplitHalves(
         frequency_hz=both("frequency_hz"), frequency_std=both("frequency_std"),
@@ -166,7 +192,19 @@ def split_halves(analysis: Analysis, *, max_frequency_difference: float = 0.02, 
         settings={k: used[k] for k in ("block_rows", "past_block_rows", "n_blocks")} | {
             "orders": f"{min(used['orders'])}-{max(used['orders'])}"},
         unmatched_hz=(np.delete(np.asarray(s1.frequency_hz, float), i1),
-                      np.delete(np.asarray(s2.frequency_hz, float), i2)))
+                      np.delete(np.asarray(s2.frequency_hz, float), i2)),
+        z_mac=np.array([t[0] for t in tests], float), mac_p_value=np.array([t[1] for t in tests], float))
+
+
+def _shape_test(s1, a: int, s2, b: int) -> tuple:
+    """(z_MAC, p-value) of the "same mode" test of mode ``a`` of ``s1`` against mode ``b`` of ``s2``."""
+    c1, c2 = getattr(s1, "mode_covariance", None), getattr(s2, "mode_covariance", None)
+    if c1 is None or c2 is None:
+        return float("nan"), float("nan")
+    t = mac_test(s1.mode_shape[:, a], s2.mode_shape[:, b], shape_covariance(c1[a]), shape_covariance(c2[b]))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        z = (1.0 - t.mac - t.loss_mean) / t.loss_std if t.loss_std > 0 else float("nan")
+    return float(z), t.p_value
 
 
 def _pair(s1, s2, tol: float, min_mac: float) -> list:

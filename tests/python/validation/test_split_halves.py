@@ -7,6 +7,7 @@ import pytest
 import modaluq
 from modaluq.analysis import Analysis
 from modaluq.cli import main
+from modaluq.indicators import mac_test, shape_covariance
 from modaluq.simulate import simulate
 from modaluq.validation import SplitHalves, split_halves
 
@@ -39,12 +40,20 @@ def test_the_halves_are_identified_alike_and_z_is_the_difference_over_its_std(re
                                                                               runs[1].damping_std[j])
         assert check.z_frequency[k] == pytest.approx(zf, rel=1e-12)
         assert check.z_damping[k] == pytest.approx(zx, rel=1e-12)
+        # the shapes: 1 - MAC standardised by its mean and σ under "same mode", from each half's covariance
+        t = mac_test(runs[0].mode_shape[:, i], runs[1].mode_shape[:, j], shape_covariance(runs[0].mode_covariance[i]),
+                     shape_covariance(runs[1].mode_covariance[j]))
+        assert check.mac[k] == pytest.approx(t.mac, rel=1e-12)
+        assert check.z_mac[k] == pytest.approx((1 - t.mac - t.loss_mean) / t.loss_std, rel=1e-9)
+        assert check.mac_p_value[k] == pytest.approx(t.p_value, rel=1e-9)
     s = check.summary()
     assert s["rms_z_frequency"] == pytest.approx(np.sqrt(np.mean(check.z_frequency ** 2)))
     assert s["within_damping"] == pytest.approx(np.mean(abs(check.z_damping) <= 1.959963984540054))
+    assert s["rms_z_mac"] == pytest.approx(np.sqrt(np.mean(check.z_mac ** 2)))
+    assert s["same_mode_rejected"] == pytest.approx(np.mean(check.mac_p_value < 0.05))
     table = check.to_dataframe()
-    assert list(table["z_frequency"]) == list(check.z_frequency) and table.shape == (6, 11)
-    assert "6 modes in both halves" in check.report()
+    assert list(table["z_frequency"]) == list(check.z_frequency) and table.shape == (6, 13)
+    assert "6 modes in both halves" in check.report() and "RMS z_MAC" in check.report()
 
 
 def test_the_second_half_takes_the_first_halfs_automatic_settings(record):
