@@ -151,25 +151,18 @@ class Diagram:
         """The ``(2+2l, 2+2l)`` covariance of ``[f, ξ, Re shape, Im shape]`` of pole ``pole`` (an
         index into these arrays), from the identification's :class:`~modaluq.Modes`; ``None`` when
         unknown (no uncertainty, or a Diagram constructed, copied or unpickled)."""
-        found = self._pole_of_modes(pole)
-        if found is None:
-            return None
-        m, i = found
-        return None if m.covariance is None else m.covariance[i]
+        return self._pole_field(pole, "covariance")
 
     def pole_shape_factor(self, pole: int):
         """The ``(2l, n_blocks)`` first-order factor V of ``[Re shape; Im shape]`` of pole ``pole``
         (``Modes.mode_shape_factor``): ``V_i V_jᵀ`` is the cross-covariance of two poles' shapes.
         ``None`` unless the identification ran with ``keep_shape_factor=True`` (or for a Diagram
         constructed, copied or unpickled)."""
-        found = self._pole_of_modes(pole)
-        if found is None:
-            return None
-        m, i = found
-        return None if m.mode_shape_factor is None else m.mode_shape_factor[i]
+        return self._pole_field(pole, "mode_shape_factor")
 
-    def _pole_of_modes(self, pole: int):
-        """(the identification's Modes holding ``pole``, its index there), or None when unknown."""
+    def _pole_field(self, pole: int, name: str):
+        """Pole ``pole``'s entry of the identification's per-mode array ``name`` (a field of
+        :class:`~modaluq.Modes`), or None when unknown or not kept."""
         modes = self._modes
         if modes is None or not self.has_uncertainty:
             return None
@@ -180,7 +173,8 @@ class Diagram:
         for m in modes:
             k = int(np.size(m.frequency_hz))
             if pole < first + k:
-                return m, pole - first
+                values = getattr(m, name)
+                return None if values is None else values[pole - first]
             first += k
         return None
 
