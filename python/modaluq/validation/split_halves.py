@@ -6,9 +6,10 @@ halves (the halves are independent records of the same structure): over many mod
 about 1 and 95 % of the z lie within ±1.96. The shapes are checked alike: under "same mode" the
 loss 1 − MAC of the two halves' shapes has a mean and σ from both shapes' covariances
 (:func:`modaluq.indicators.mac_test`), so z_MAC = (1 − MAC − mean) / σ has RMS about 1 and the
-"same mode" test rejects about 5 % of the pairs at 5 % if the shapes' σ are right. No simulation is needed, so it checks σ on the
-user's own record. A structure that changes between the halves (temperature, traffic mass, a
-strong-motion half and a coda) gives |z| > 1 that is not σ's fault: choose a stationary record.
+"same mode" test rejects about 5 % of the pairs at 5 % if the shapes' σ are right. No
+simulation is needed, so it checks σ on the user's own record. A structure that changes between
+the halves (temperature, traffic mass, an operating machine's state, a strong-motion half and a
+coda) gives |z| > 1 that is not σ's fault: choose a stationary record.
 
     >>> import modaluq
     >>> from modaluq.analysis import Analysis
