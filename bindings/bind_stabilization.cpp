@@ -105,6 +105,7 @@ void modaluq::python::bind_stabilization(py::module_& m) {
         .def_readwrite("linkage", &ClusteringOptions::linkage)
         .def_readwrite("cluster_std", &ClusteringOptions::cluster_std)
         .def_readwrite("representative", &ClusteringOptions::representative)
+        .def_readwrite("shape_representative", &ClusteringOptions::shape_representative)
         .def("validate", &ClusteringOptions::validate);
 
     py::class_<SelectedModes>(m, "SelectedModes")
@@ -122,6 +123,8 @@ void modaluq::python::bind_stabilization(py::module_& m) {
         .def_readonly("min_mac", &SelectedModes::min_mac)
         .def_readonly("representative_order", &SelectedModes::representative_order)
         .def_readonly("representative_pole", &SelectedModes::representative_pole)
+        .def_readonly("shape_pole", &SelectedModes::shape_pole)
+        .def_readonly("shape_order", &SelectedModes::shape_order)
         .def_readonly("n_poles", &SelectedModes::n_poles)
         .def_readonly("order_min", &SelectedModes::order_min)
         .def_readonly("order_max", &SelectedModes::order_max)

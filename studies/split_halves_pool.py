@@ -91,9 +91,16 @@ COLUMNS = ("group", "record", "n_windows", "window", "t0_s", "t1_s", "half_s", "
            "z_f", "z_xi", "z_f_cap", "mac", "z_mac", "mac_p_value", "harmonic", "rms_ratio")
 
 
+def _clustering(representative):
+    if representative == "shape-lowest":
+        return modaluq.ClusteringSettings(shape_representative="lowest")
+    return modaluq.ClusteringSettings(representative=representative)
+
+
 def pairs_of_record(name, data, levels=LEVELS, tolerance=0.02, representative="median"):
     """Every mode pair of every window of one record (dicts with :data:`COLUMNS`), and the failed
-    windows; ``representative`` is ``ClusteringSettings.representative``."""
+    windows; ``representative`` is ``ClusteringSettings.representative``, or "shape-lowest" for the
+    median representative with ``shape_representative="lowest"``."""
     group, read, band = RECORDS[name]
     y, fs = read(data)
     T = y.shape[0] / fs
@@ -102,7 +109,7 @@ def pairs_of_record(name, data, levels=LEVELS, tolerance=0.02, representative="m
         for k in range(n):
             t0, t1 = k * T / n, (k + 1) * T / n
             a = Analysis.from_arrays(y, fs=fs, settings=modaluq.Settings(frequency_range=band, start=t0, stop=t1),
-                                     clustering=modaluq.ClusteringSettings(representative=representative))
+                                     clustering=_clustering(representative))
             try:
                 check = split_halves(a, max_frequency_difference=tolerance)
             except ValueError as exc:
@@ -230,8 +237,9 @@ if __name__ == "__main__":
     p.add_argument("--out", default=None, help="CSV of every pair")
     p.add_argument("--levels", type=int, nargs="+", default=list(LEVELS), help="numbers of windows (default 1 2 4 8)")
     p.add_argument("--tolerance", type=float, default=0.02, help="pairing: largest relative frequency difference")
-    p.add_argument("--representative", choices=("median", "lowest"), default="median",
-                   help="ClusteringSettings.representative of every analysis")
+    p.add_argument("--representative", choices=("median", "lowest", "shape-lowest"), default="median",
+                   help="ClusteringSettings.representative of every analysis; shape-lowest: the median "
+                        "representative with shape_representative='lowest'")
     args = p.parse_args()
     main(args.data_dir, args.out, levels=tuple(args.levels), tolerance=args.tolerance,
          representative=args.representative)

@@ -976,6 +976,7 @@ class ClusteringOptions:
     merge_fragments: bool
     per_cluster_min_size: bool
     representative: Representative
+    shape_representative: Representative
     def __init__(self) -> None:
         ...
     def validate(self) -> None:
@@ -1142,6 +1143,12 @@ class SelectedModes:
         ...
     @property
     def representative_pole(self) -> typing.Annotated[numpy.typing.NDArray[numpy.int64], "[m, 1]"]:
+        ...
+    @property
+    def shape_order(self) -> typing.Annotated[numpy.typing.NDArray[numpy.int64], "[m, 1]"]:
+        ...
+    @property
+    def shape_pole(self) -> typing.Annotated[numpy.typing.NDArray[numpy.int64], "[m, 1]"]:
         ...
 class IndicatorStatistics:
     @property

@@ -65,6 +65,7 @@ def selected_modes_to_dict(selected) -> dict:
             "damping_ratio": num(selected.damping_ratio[i]), "damping_std": num(selected.damping_std[i]),
             "damping_spread": num(selected.damping_spread[i]),
             "representative_order": int(selected.representative_order[i]),
+            "shape_order": int(selected.shape_order[i]),
             "n_poles": int(selected.n_poles[i]), "order_min": int(selected.order_min[i]),
             "order_max": int(selected.order_max[i]), "min_mac": num(selected.min_mac[i]),
             # every pole noise-coupled: may be noise, not a mode (SelectedModes.noise_coupled)
@@ -131,7 +132,8 @@ def diagram_to_xarray(diagram, selected=None, attrs: dict | None = None, geometr
                                                    "coordinate, from 1; 0: none)"})
         for name in ("frequency_hz", "damping_ratio", "frequency_std", "damping_std",
                      "frequency_spread", "damping_spread", "representative_order",
-                     "representative_pole", "n_poles", "order_min", "order_max", "min_mac"):
+                     "representative_pole", "shape_order", "shape_pole", "n_poles", "order_min", "order_max",
+                     "min_mac"):
             pole_vars[f"selected_{name}"] = (("mode",), getattr(sel, name), {})
         pole_vars["selected_mpc"] = (("mode",), sel.mpc, {"units": "1", "long_name": "modal phase collinearity"})
         pole_vars["selected_mpc_std"] = (("mode",), sel.mpc_std, {"units": "1"})

@@ -100,9 +100,10 @@ def largest_dropped_clusters(sel: "SelectedModes", most: int = 8) -> list[str]:
 class SelectedModes:
     """Physical modes chosen automatically from a :class:`Diagram`, sorted by frequency.
 
-    Each mode is one cluster of poles. Its ``frequency_hz``, ``damping_ratio``, ``mode_shape``
-    and the shape's σ are those of one **representative** pole (analytic, delta-method σ at
-    ``representative_order``); ``frequency_std`` and ``damping_std`` are the cluster's
+    Each mode is one cluster of poles. Its ``frequency_hz`` and ``damping_ratio`` are those of
+    one **representative** pole, its ``mode_shape`` and the shape's σ those of the **shape pole**
+    (the representative, unless ``settings.shape_representative`` is ``"lowest"``; analytic,
+    delta-method σ at ``shape_order``); ``frequency_std`` and ``damping_std`` are the cluster's
     (``settings.cluster_std``: the median of its reliable poles' σ, or the σ of their mean);
     the ``*_spread`` fields are the sample standard deviations (ddof=1) across the cluster's
     members, a measure of the order-to-order scatter shown beside the analytic σ (0 for a
@@ -168,13 +169,14 @@ class SelectedModes:
     #: cluster is still selected (a weak physical mode below the noise floor looks the same: the
     #: simulated chain's 1.93 Hz mode on 20,000 samples); tables mark it, exports carry the flag.
     noise_coupled: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
-    #: (n_modes, 2+2l, 2+2l) covariance of [f, ξ, Re shape, Im shape] of each representative pole
-    #: (``Diagram.pole_covariance``), or None without uncertainty. With ``settings.cluster_std ==
-    #: "mean"`` its f and ξ entries are the mode's: the [f, ξ] block from ``frequency_std``,
-    #: ``damping_std`` and ``frequency_damping_correlation``, and their covariance with the shape
-    #: the representative's correlation at those σ (the mean is formed for f and ξ only).
+    #: (n_modes, 2+2l, 2+2l) covariance of [f, ξ, Re shape, Im shape] of each shape pole
+    #: (``Diagram.pole_covariance``; the representative's unless ``shape_representative`` picks
+    #: another), or None without uncertainty. With ``settings.cluster_std == "mean"``, or a shape
+    #: pole other than the representative, its f and ξ entries are the mode's: the [f, ξ] block from
+    #: ``frequency_std``, ``damping_std`` and ``frequency_damping_correlation``, and their
+    #: covariance with the shape the pole's correlation at those σ (the mean is formed for f and ξ only).
     mode_covariance: np.ndarray | None = None
-    #: (n_modes, 2l, n_blocks) each representative pole's first-order factor of [Re shape, Im shape]
+    #: (n_modes, 2l, n_blocks) each shape pole's first-order factor of [Re shape, Im shape]
     #: (``Diagram.pole_shape_factor``): the exact σ of the AutoMAC (:meth:`mac_matrix`). None unless
     #: the identification kept it (``keep_shape_factor=True``)
     mode_shape_factor: np.ndarray | None = None
@@ -188,6 +190,10 @@ class SelectedModes:
     #: the identification's ``Result.low_signal_to_noise``: H is within 3 σ of its own estimation
     #: noise, so any of these modes may be noise (the table's heading says so)
     low_signal_to_noise: bool = False
+    #: (n_modes,) index in the diagram of the pole whose shape and shape σ the mode reports
+    #: (``settings.shape_representative``): ``representative_pole`` unless ``"lowest"``
+    shape_pole: np.ndarray | None = None
+    shape_order: np.ndarray | None = None  #: (n_modes,) its model order
 
     #: the heading of :meth:`__str__` when :attr:`low_signal_to_noise`
     LOW_SIGNAL_TO_NOISE_HEADING = ("H is within 3 std of its estimation noise: these modes cannot be told from "
@@ -202,6 +208,11 @@ class SelectedModes:
         if flags.shape != np.shape(self.frequency_hz):
             flags = np.zeros(np.shape(self.frequency_hz), bool)
         object.__setattr__(self, "noise_coupled", flags)
+        # unknown (made by hand or by PoSER): the shape is the representative's
+        if self.shape_pole is None:
+            object.__setattr__(self, "shape_pole", np.asarray(self.representative_pole, np.int64))
+        if self.shape_order is None:
+            object.__setattr__(self, "shape_order", np.asarray(self.representative_order, np.int64))
         for name in ("mpc", "mpc_std", "mpd_deg", "mpd_std_deg"):  # unknown: NaN per mode
             values = np.asarray(getattr(self, name), float)
             if values.shape != np.shape(self.frequency_hz):
@@ -282,6 +293,9 @@ class SelectedModes:
             s = f"{self.n_modes} modes ({self.LOW_SIGNAL_TO_NOISE_HEADING}; std: analytic, {self.std_words}; " \
                 "spread: across the cluster)\n"
         s += self.table()
+        if self.settings.shape_representative == "lowest" and self.settings.representative != "lowest":
+            s += ("\nshapes: each cluster's pole at the lowest sufficient order, with its own std (orders "
+                  + ", ".join(str(int(o)) for o in self.shape_order) + ")")
         if self.dropped_n_poles.size:
             # counted by the core's code of each
             too_small = self.dropped_code.count(DropReason.TOO_FEW_POLES)
@@ -408,6 +422,7 @@ def select_modes(diagram, settings: ClusteringSettings | None = None, **kwargs) 
         mode_shape_spread_real=sel.mode_shape_spread_real, mode_shape_spread_imag=sel.mode_shape_spread_imag,
         min_mac=sel.min_mac, representative_order=np.asarray(sel.representative_order, np.int64),
         representative_pole=np.asarray(sel.representative_pole, np.int64),
+        shape_pole=np.asarray(sel.shape_pole, np.int64), shape_order=np.asarray(sel.shape_order, np.int64),
         n_poles=np.asarray(sel.n_poles, np.int64), order_min=np.asarray(sel.order_min, np.int64),
         order_max=np.asarray(sel.order_max, np.int64),
         members=tuple(np.asarray(m, dtype=np.int64) for m in sel.members),
@@ -436,20 +451,22 @@ def select_modes(diagram, settings: ClusteringSettings | None = None, **kwargs) 
 
 
 def _shape_indicators(diagram, modes: SelectedModes) -> dict:
-    """The representative poles' covariances (from the diagram's identification) and the MPC
-    and MPD of every selected shape with their σ."""
+    """The covariances of the shape poles (the representatives unless ``shape_representative``
+    says otherwise; from the diagram's identification) and the MPC and MPD of every selected shape
+    with their σ. Where the f and ξ come from another pole, or from the cluster's mean, the
+    covariance's [f, ξ] block is the mode's (:func:`_with_cluster_std`)."""
     covs = None
     pole_covariance = getattr(diagram, "pole_covariance", None)
     if modes.n_modes and modes.has_uncertainty and pole_covariance is not None:
-        found = [pole_covariance(int(p)) for p in modes.representative_pole]
+        found = [pole_covariance(int(p)) for p in modes.shape_pole]
         if all(c is not None for c in found):
             covs = np.stack(found)
-            if modes.settings.cluster_std == "mean":
+            if modes.settings.cluster_std == "mean" or np.any(modes.shape_pole != modes.representative_pole):
                 covs = _with_cluster_std(covs, modes)
     factors = None
     pole_shape_factor = getattr(diagram, "pole_shape_factor", None)
     if covs is not None and pole_shape_factor is not None:
-        found = [pole_shape_factor(int(p)) for p in modes.representative_pole]
+        found = [pole_shape_factor(int(p)) for p in modes.shape_pole]
         if all(v is not None for v in found):
             factors = np.stack(found)
     mpc, mpd = [], []

@@ -90,6 +90,7 @@ _CODECS = {
     # core's default, one record's "median"
     "cluster_std": _Codec(lambda v: v.name, lambda v: getattr(_core.ClusterStd, v or "median")),
     "representative": _Codec(lambda v: v.name, lambda v: getattr(_core.Representative, v)),
+    "shape_representative": _Codec(lambda v: v.name, lambda v: getattr(_core.Representative, v)),
 }
 
 
@@ -469,6 +470,13 @@ class ClusteringSettings:
         their σ read (docs/shapes.md §6: on the paper's chain, 200 records, the σ of MPC and MAC
         of modes 2–4 and 6 input/output and 2–3 output-only go from 0.01–0.83 of their scatter
         to 0.96–1.26).
+    shape_representative : {"median", "lowest"}
+        Which member gives each mode's shape and the shape's σ (``SelectedModes.shape_pole``),
+        by the same two rules; f, ξ and their σ stay the representative's. ``"median"``
+        (default): the representative itself. ``"lowest"``: the cluster's reliable member at the
+        lowest order n ≥ max(k*, 2m), where the shape's first-order σ is calibrated, while the
+        representative's f and ξ keep the cluster's σ (docs/shapes.md §6). With
+        ``representative="lowest"`` both are that pole.
     """
 
     distance_threshold: float = _CLUSTERING["distance_threshold"]
@@ -488,6 +496,7 @@ class ClusteringSettings:
     #: None: the identification's own (``"mean"`` for a multi-setup merge, else the core's ``"median"``)
     cluster_std: str | None = None
     representative: str = _CLUSTERING["representative"]
+    shape_representative: str = _CLUSTERING["shape_representative"]
 
     def __post_init__(self):
         check_real("distance_threshold", self.distance_threshold, low=0, low_open=True)
@@ -518,10 +527,12 @@ class ClusteringSettings:
             raise TypeError(f"cluster_std must be None, 'median' or 'mean'; got {type(self.cluster_std).__name__}")
         if self.cluster_std not in (None, "median", "mean"):
             raise ValueError(f"cluster_std must be None, 'median' or 'mean'; got {self.cluster_std!r}")
-        if not isinstance(self.representative, str):
-            raise TypeError(f"representative must be 'median' or 'lowest'; got {type(self.representative).__name__}")
-        if self.representative not in ("median", "lowest"):
-            raise ValueError(f"representative must be 'median' or 'lowest'; got {self.representative!r}")
+        for name in ("representative", "shape_representative"):
+            value = getattr(self, name)
+            if not isinstance(value, str):
+                raise TypeError(f"{name} must be 'median' or 'lowest'; got {type(value).__name__}")
+            if value not in ("median", "lowest"):
+                raise ValueError(f"{name} must be 'median' or 'lowest'; got {value!r}")
 
     def to_dict(self) -> dict:
         return {f.name: _exported(getattr(self, f.name)) for f in fields(self)}

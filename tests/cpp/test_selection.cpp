@@ -175,6 +175,48 @@ TEST_CASE("selection: the lowest representative is the lowest reliable member at
     CHECK(std::string(modaluq::to_string(modaluq::Representative::lowest)) == "lowest");
 }
 
+TEST_CASE("selection: the shape pole gives the shape, its sigma and spreads; f and xi stay the representative's") {
+    // The mode of the test above, its shape turning with the order; k* = 11.
+    std::map<Index, std::vector<P>> by_order;
+    for (Index n = 4; n <= 40; n += 2) {
+        P p{10.0 + 1e-4 * double(n), 0.02, 0, 0.01 + 1e-4 * double(n)};
+        p.coupled = n == 12;
+        by_order[n] = {p};
+    }
+    modaluq::Diagram d = all_stable(by_order);
+    d.poles.noise_floor_order = 11;
+    for (Index i = 0; i < d.poles.size(); ++i) {
+        d.poles.close_singular_values(i) = d.poles.order(i) == 14;
+        d.poles.mode_shape(1, i) += 1e-3 * double(d.poles.order(i));  // each order's shape differs a little
+        d.poles.mode_shape_std_real(1, i) = 1e-4 * double(d.poles.order(i));
+    }
+    modaluq::ClusteringOptions o;
+    const auto median = modaluq::select_modes(d, o);
+    o.shape_representative = modaluq::Representative::lowest;
+    const auto s = modaluq::select_modes(d, o);
+    o.representative = modaluq::Representative::lowest;
+    const auto lowest = modaluq::select_modes(d, o);
+    REQUIRE(s.n_modes() == 1);
+    // f, xi, their sigma and the representative: the default's
+    CHECK(s.representative_pole(0) == median.representative_pole(0));
+    CHECK(s.frequency_hz(0) == median.frequency_hz(0));
+    CHECK(s.frequency_std(0) == median.frequency_std(0));
+    CHECK(s.damping_std(0) == median.damping_std(0));
+    CHECK(median.shape_pole(0) == median.representative_pole(0));
+    // the shape: that of the lowest reliable member at or above max(k*, 2 m) = 11, order 16 (12
+    // noise-coupled, 14 at a close cut), as representative lowest reads it
+    const Index sp = s.shape_pole(0);
+    CHECK(s.shape_order(0) == 16);
+    CHECK(sp == lowest.representative_pole(0));
+    CHECK(s.mode_shape.col(0) == d.poles.mode_shape.col(sp));
+    CHECK(s.mode_shape_std_real.col(0) == d.poles.mode_shape_std_real.col(sp));
+    CHECK(s.mode_shape.col(0) == lowest.mode_shape.col(0));
+    CHECK(s.min_mac(0) == lowest.min_mac(0));
+    CHECK(s.mode_shape_spread_real.col(0) == lowest.mode_shape_spread_real.col(0));
+    CHECK(s.mode_shape.col(0) != median.mode_shape.col(0));
+    CHECK(s.members == median.members);
+}
+
 TEST_CASE("selection: a cluster whose frequency is less certain than its peak's bandwidth is dropped") {
     // Two stable columns over 10 orders: a 2 %-damped mode with sigma_f = 0.1 % of f
     // (sigma_f / (f xi) = 0.05) and a 0.5 %-damped column with sigma_f = 1 % of f (ratio 2).

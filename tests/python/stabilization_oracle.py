@@ -363,6 +363,7 @@ def select_modes_reference(diagram: Diagram, settings: ClusteringSettings | None
     n_out = diagram.n_outputs
     n_modes = len(kept)
     rep = np.zeros(n_modes, dtype=np.int64)
+    sp = np.zeros(n_modes, dtype=np.int64)
     f_spread = np.zeros(n_modes)
     xi_spread = np.zeros(n_modes)
     sh_spread_r = np.zeros((n_out, n_modes))
@@ -416,23 +417,29 @@ def select_modes_reference(diagram: Diagram, settings: ClusteringSettings | None
                 sf_med[k], sxi_med[k] = diagram.frequency_std[rep[k]], diagram.damping_std[rep[k]]
             if diagram.frequency_damping_correlation.size == diagram.n_poles:
                 rho[k] = diagram.frequency_damping_correlation[rep[k]]
-        ref = int(np.argmax(np.abs(shape[:, rep[k]])))
+        # the shape pole: the representative, or the lowest sufficient member (shape_representative)
+        sp[k] = rep[k]
+        if getattr(settings, "shape_representative", "median") == "lowest":
+            above = candidates[order[candidates] >= max(diagram.noise_floor_order, 2 * n_modes)]
+            sp[k] = above.min() if above.size else candidates.max()
+        ref = int(np.argmax(np.abs(shape[:, sp[k]])))
         aligned = shape[:, members] / shape[ref, members][None, :]
         sh_spread_r[:, k] = np.std(aligned.real, axis=1, ddof=ddof)
         sh_spread_i[:, k] = np.std(aligned.imag, axis=1, ddof=ddof)
-        min_mac[k] = modal_assurance_criterion(shape[:, rep[k]], shape[:, members]).min()
+        min_mac[k] = modal_assurance_criterion(shape[:, sp[k]], shape[:, members]).min()
 
     def empty_if_none(a):
         return a if a.size else np.zeros(0)
 
     return SelectedModes(
-        frequency_hz=f[rep], damping_ratio=xi[rep], mode_shape=shape[:, rep],
+        frequency_hz=f[rep], damping_ratio=xi[rep], mode_shape=shape[:, sp],
         frequency_std=sf_med, damping_std=sxi_med,
-        mode_shape_std_real=diagram.mode_shape_std_real[:, rep],
-        mode_shape_std_imag=diagram.mode_shape_std_imag[:, rep],
+        mode_shape_std_real=diagram.mode_shape_std_real[:, sp],
+        mode_shape_std_imag=diagram.mode_shape_std_imag[:, sp],
         frequency_spread=f_spread, damping_spread=xi_spread,
         mode_shape_spread_real=sh_spread_r, mode_shape_spread_imag=sh_spread_i,
-        min_mac=min_mac, representative_order=order[rep], representative_pole=rep,
+        min_mac=min_mac, representative_order=order[rep], representative_pole=rep, shape_pole=sp,
+        shape_order=order[sp],
         n_poles=np.array([m.size for m in kept], dtype=np.int64),
         order_min=np.array([order[m].min() for m in kept], dtype=np.int64),
         order_max=np.array([order[m].max() for m in kept], dtype=np.int64),

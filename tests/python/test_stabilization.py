@@ -467,12 +467,43 @@ def test_chain_lowest_representative_is_one_pole_read_at_the_lowest_sufficient_o
     assert np.all(z <= 3.0), z
 
 
+def test_chain_shape_pole_gives_the_shape_and_the_representative_f_and_xi(chain_selection):
+    """shape_representative="lowest": f, ξ and their σ are the default's; the shape, its σ and its
+    covariance block are those of the pole representative="lowest" reads; the covariance's [f, ξ]
+    block is the mode's, its f-shape rows the shape pole's correlations at the mode's σ."""
+    _, diagram, sel = chain_selection
+    low = diagram.select_modes(representative="lowest")
+    hyb = diagram.select_modes(shape_representative="lowest")
+    assert [list(m) for m in hyb.members] == [list(m) for m in sel.members]
+    for name in ("frequency_hz", "damping_ratio", "frequency_std", "damping_std", "representative_pole"):
+        np.testing.assert_array_equal(getattr(hyb, name), getattr(sel, name), err_msg=name)
+    np.testing.assert_array_equal(hyb.shape_pole, low.representative_pole)
+    np.testing.assert_array_equal(hyb.shape_order, diagram.order[hyb.shape_pole])
+    np.testing.assert_array_equal(hyb.mode_shape, low.mode_shape)
+    np.testing.assert_array_equal(hyb.mode_shape_std_real, low.mode_shape_std_real)
+    np.testing.assert_array_equal(hyb.mpc_std, low.mpc_std)
+    np.testing.assert_array_equal(sel.shape_pole, sel.representative_pole)  # the default: one pole
+    assert "shapes: each cluster's pole at the lowest sufficient order" in str(hyb)
+    assert "shapes:" not in str(sel) and "shapes:" not in str(low)
+    assert np.any(hyb.shape_pole != hyb.representative_pole)
+    for k, p in enumerate(hyb.shape_pole):
+        own = diagram.pole_covariance(int(p))
+        c = hyb.mode_covariance[k]
+        np.testing.assert_array_equal(c[2:, 2:], own[2:, 2:])
+        assert c[0, 0] == hyb.frequency_std[k] ** 2 and c[1, 1] == hyb.damping_std[k] ** 2
+        corr = c[0, 2:] / np.sqrt(c[0, 0] * np.diag(c)[2:].clip(1e-300))
+        own_corr = own[0, 2:] / np.sqrt(own[0, 0] * np.diag(own)[2:].clip(1e-300))
+        np.testing.assert_allclose(corr, own_corr, rtol=1e-9, atol=1e-12)
+
+
 def test_representative_must_be_median_or_lowest(chain_selection):
     _, diagram, _ = chain_selection
     with pytest.raises(ValueError, match="representative"):
         diagram.select_modes(representative="highest")
     with pytest.raises(TypeError, match="representative"):
         diagram.select_modes(representative=1)
+    with pytest.raises(ValueError, match="shape_representative"):
+        diagram.select_modes(shape_representative="highest")
 
 
 def test_chain_rejected_and_unstable_poles_keep_their_reason(chain_selection):

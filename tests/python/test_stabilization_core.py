@@ -42,7 +42,8 @@ CLUSTERING = [{}, {"linkage": "single"}, {"linkage": "complete", "distance_thres
               {"statuses": ("stable", "stable_frequency"), "min_cluster_fraction": 0.5},
               {"per_cluster_min_size": True, "max_frequency_std_per_bandwidth": 0.3},
               {"max_frequency_std_per_bandwidth": None}, {"cluster_std": "mean"}, {"cluster_std": "median"},
-              {"representative": "lowest"}, {"representative": "lowest", "cluster_std": "mean"}]
+              {"representative": "lowest"}, {"representative": "lowest", "cluster_std": "mean"},
+              {"shape_representative": "lowest"}, {"shape_representative": "lowest", "cluster_std": "mean"}]
 
 
 @pytest.fixture(scope="module")
@@ -70,6 +71,9 @@ def assert_same_selection(core, ref):
     assert core.n_modes == ref.n_modes
     assert core.min_cluster_size == ref.min_cluster_size
     np.testing.assert_array_equal(core.representative_pole, ref.representative_pole)
+    np.testing.assert_array_equal(core.shape_pole, ref.shape_pole)
+    np.testing.assert_array_equal(core.mode_shape, ref.mode_shape)
+    np.testing.assert_array_equal(core.mode_shape_std_real, ref.mode_shape_std_real)
     assert [list(m) for m in core.members] == [list(m) for m in ref.members]
     np.testing.assert_array_equal(core.mode_of_pole, ref.mode_of_pole)
     np.testing.assert_array_equal(core.dropped_n_poles, ref.dropped_n_poles)
@@ -79,7 +83,7 @@ def assert_same_selection(core, ref):
     for name in ("frequency_hz", "damping_ratio", "frequency_std", "damping_std", "frequency_spread",
                  "damping_spread", "mode_shape_spread_real", "mode_shape_spread_imag", "min_mac"):
         np.testing.assert_allclose(getattr(core, name), getattr(ref, name), rtol=1e-9, atol=1e-13, err_msg=name)
-    for name in ("n_poles", "order_min", "order_max", "representative_order"):
+    for name in ("n_poles", "order_min", "order_max", "representative_order", "shape_order"):
         np.testing.assert_array_equal(getattr(core, name), getattr(ref, name), err_msg=name)
     assert core.settings.cluster_std == ref.settings.cluster_std
     if core.settings.cluster_std == "mean":  # the correlation of the mean, from the same rows

@@ -101,6 +101,11 @@ struct ClusteringOptions {
     std::vector<PoleStatus> statuses{PoleStatus::stable};  ///< which poles are clustered
     Linkage linkage = Linkage::average;  ///< see detail/linkage.hpp
     Representative representative = Representative::median;  ///< see Representative
+    /// The member that gives each mode's shape and its sigma (SelectedModes::shape_pole), by the
+    /// same rules: median, the representative itself; lowest, the lowest reliable member at an order
+    /// n >= max(k*, 2 m), whose shape sigma is calibrated where the representative's, far above the
+    /// true order, is too small (docs/shapes.md §6). With representative lowest both are that pole.
+    Representative shape_representative = Representative::median;
     /// The sigma of f and xi reported per mode (SelectedModes::frequency_std, damping_std,
     /// frequency_damping_correlation); the clusters, the representative and its value, and the
     /// tests on the poles' own sigma (max_frequency_std_per_bandwidth, merge_fragments) do not
@@ -156,8 +161,9 @@ inline const char* to_string(DropReason r) {
     return "?";
 }
 
-/// Modes chosen from a Diagram, sorted by frequency. f, xi and the shape are those of one
-/// representative pole; frequency_std and damping_std are over the cluster's reliable poles (not
+/// Modes chosen from a Diagram, sorted by frequency. f and xi are those of one representative
+/// pole, the shape and its sigma those of the shape pole (the representative unless
+/// ClusteringOptions::shape_representative says lowest); frequency_std and damping_std are over the cluster's reliable poles (not
 /// at a close cut, not noise-coupled): the median of their sigma, or the sigma of their mean
 /// (ClusteringOptions::cluster_std); *_spread is the sample std (ddof 1) across the cluster, how
 /// much the estimate moves with the order.
@@ -167,15 +173,20 @@ struct SelectedModes {
     Eigen::MatrixXcd mode_shape;            ///< l x n_modes, largest component 1
     Eigen::VectorXd frequency_std;          ///< Hz, analytic, over the reliable poles (cluster_std)
     Eigen::VectorXd damping_std;            ///< fraction
-    Eigen::MatrixXd mode_shape_std_real;    ///< l x n_modes, of the representative
+    Eigen::MatrixXd mode_shape_std_real;    ///< l x n_modes, of the shape pole
     Eigen::MatrixXd mode_shape_std_imag;    ///< l x n_modes
     Eigen::VectorXd frequency_spread;       ///< Hz, std across the cluster
     Eigen::VectorXd damping_spread;         ///< fraction
-    Eigen::MatrixXd mode_shape_spread_real; ///< l x n_modes, shapes scaled to the representative's reference
+    Eigen::MatrixXd mode_shape_spread_real; ///< l x n_modes, shapes scaled to the shape pole's reference
     Eigen::MatrixXd mode_shape_spread_imag; ///< l x n_modes
-    Eigen::VectorXd min_mac;                ///< smallest MAC between the representative and a member
+    Eigen::VectorXd min_mac;                ///< smallest MAC between the shape pole and a member
     IndexVector representative_order;       ///< model order of the representative
     IndexVector representative_pole;        ///< its index in the diagram
+    /// the member whose shape (and its sigma, spread reference and min_mac) the mode reports
+    /// (ClusteringOptions::shape_representative): the representative, or its cluster's lowest
+    /// sufficient member
+    IndexVector shape_pole;
+    IndexVector shape_order;                ///< its model order
     IndexVector n_poles;                    ///< members of each cluster
     IndexVector order_min, order_max;       ///< lowest / highest order in each cluster
     std::vector<std::vector<Index>> members;  ///< per mode, the diagram indices of its poles (ascending)
@@ -534,6 +545,8 @@ inline SelectedModes select_modes(const Diagram& diagram, const ClusteringOption
     s.min_mac.resize(nm);
     s.representative_order.resize(nm);
     s.representative_pole.resize(nm);
+    s.shape_pole.resize(nm);
+    s.shape_order.resize(nm);
     s.n_poles.resize(nm);
     s.order_min.resize(nm);
     s.order_max.resize(nm);
@@ -581,18 +594,20 @@ inline SelectedModes select_modes(const Diagram& diagram, const ClusteringOption
             const double a = (f(i) - med) / scale_f, b = (xi(i) - med_xi) / scale_xi;
             return a * a + b * b;
         };
+        // candidates ascend in order (one pole per order): the first at or above the floor, else
+        // the nearest below it
+        const auto above = std::find_if(candidates.begin(), candidates.end(),
+                                        [&](Index i) { return P.order(i) >= lowest_floor; });
+        const Index lowest_member = above != candidates.end() ? *above : candidates.back();
         Index rep = candidates[0];
         const bool lowest = options.representative == Representative::lowest;
         if (lowest) {
-            // candidates ascend in order (one pole per order): the first at or above the floor,
-            // else the nearest below it
-            const auto above = std::find_if(candidates.begin(), candidates.end(),
-                                            [&](Index i) { return P.order(i) >= lowest_floor; });
-            rep = above != candidates.end() ? *above : candidates.back();
+            rep = lowest_member;
         } else {
             for (Index i : candidates)  // ascending order: "<=" hands ties to the higher order
                 if (distance(i) <= distance(rep)) rep = i;
         }
+        const Index shape_rep = options.shape_representative == Representative::lowest ? lowest_member : rep;
         // "lowest" reports one order's identification, sigma included; "median" the cluster's sigma
         s.frequency_std(k) = sf.empty() || lowest ? P.frequency_std(rep) : detail::median(sf);
         s.damping_std(k) = sxi.empty() || lowest ? P.damping_std(rep) : detail::median(sxi);
@@ -610,7 +625,7 @@ inline SelectedModes select_modes(const Diagram& diagram, const ClusteringOption
             s.frequency_damping_correlation(k) = uf > 0.0 && uxi > 0.0 ? u.head(nb).dot(u.tail(nb)) / (uf * uxi) : nan;
         }
         Index ref = 0;
-        P.mode_shape.col(rep).cwiseAbs().maxCoeff(&ref);
+        P.mode_shape.col(shape_rep).cwiseAbs().maxCoeff(&ref);
         for (Index r = 0; r < l; ++r) {
             std::vector<double> re, im;
             for (Index i : members) {
@@ -622,7 +637,8 @@ inline SelectedModes select_modes(const Diagram& diagram, const ClusteringOption
             s.mode_shape_spread_imag(r, k) = detail::sample_std(im, ddof);
         }
         double min_mac = 1.0;
-        for (Index i : members) min_mac = std::min(min_mac, detail::mac_pair(P.mode_shape.col(rep), P.mode_shape.col(i)));
+        for (Index i : members)
+            min_mac = std::min(min_mac, detail::mac_pair(P.mode_shape.col(shape_rep), P.mode_shape.col(i)));
         s.min_mac(k) = min_mac;
         if (P.has_uncertainty) s.frequency_std_per_bandwidth(k) = std_per_bandwidth(members);
         s.frequency_hz(k) = f(rep);
@@ -630,11 +646,13 @@ inline SelectedModes select_modes(const Diagram& diagram, const ClusteringOption
         if (!of_mean && P.frequency_damping_correlation.size() == n)
             s.frequency_damping_correlation(k) = P.frequency_damping_correlation(rep);
         if (P.block_too_short.size() == n) s.block_too_short(k) = P.block_too_short(rep);
-        s.mode_shape.col(k) = P.mode_shape.col(rep);
-        s.mode_shape_std_real.col(k) = P.mode_shape_std_real.col(rep);
-        s.mode_shape_std_imag.col(k) = P.mode_shape_std_imag.col(rep);
+        s.mode_shape.col(k) = P.mode_shape.col(shape_rep);
+        s.mode_shape_std_real.col(k) = P.mode_shape_std_real.col(shape_rep);
+        s.mode_shape_std_imag.col(k) = P.mode_shape_std_imag.col(shape_rep);
         s.representative_order(k) = P.order(rep);
         s.representative_pole(k) = rep;
+        s.shape_pole(k) = shape_rep;
+        s.shape_order(k) = P.order(shape_rep);
         s.n_poles(k) = Index(members.size());
         s.order_min(k) = P.order(members.front());
         s.order_max(k) = P.order(members.back());

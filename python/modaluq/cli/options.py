@@ -23,7 +23,7 @@ SETTINGS_OPTIONS = ("frequency_range", "start", "stop", "decimate", "detrend", "
                     "past_block_rows", "n_blocks", "bootstrap_draws")
 CRITERIA_OPTIONS = ("max_frequency_change", "max_damping_change", "min_mac", "damping_std_factor", "match_window",
                     "frequency_std_factor", "max_frequency_cov", "max_damping_ratio")
-CLUSTERING_OPTIONS = ("distance_threshold", "min_cluster_size", "representative")
+CLUSTERING_OPTIONS = ("distance_threshold", "min_cluster_size", "representative", "shape_representative")
 #: Options whose 0 switches their test off (the field's None).
 OFF_AT_ZERO = ("frequency_std_factor", "max_frequency_cov", "damping_std_factor")
 
@@ -111,6 +111,11 @@ def add_analysis_options(p: argparse.ArgumentParser) -> None:
                         "and damping (with the cluster's std), or the one at the lowest order that holds every "
                         "selected mode and is not below the noise floor (with its own std, whose shape std is "
                         f"calibrated; docs/shapes.md) (default {k.representative})")
+    g.add_argument("--shape-representative", choices=("median", "lowest"), default=None,
+                   help="the pole whose shape (and shape std) each mode reports: the representative, or the "
+                        "cluster's member at the lowest order that holds every selected mode and is not below the "
+                        "noise floor, whose shape std is calibrated; f and xi stay the representative's "
+                        f"(docs/shapes.md) (default {k.shape_representative})")
 
 
 def _given(args, names) -> dict:

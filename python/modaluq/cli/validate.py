@@ -55,7 +55,7 @@ def _file_names(orders) -> list:
 SIMULATION_ONLY = ("records", "samples", "unknown_input_std", "damping_ratio", "n_dof", "input_dofs", "output_dofs",
                    "seed", "processes", "noise_coupling_limit")
 RECORD_ONLY = ("fs", "format", "read_option", "inputs", "outputs", "frequency_range", "start", "stop",
-               "representative")
+               "representative", "shape_representative")
 
 
 def _option(name: str) -> str:
@@ -86,8 +86,8 @@ def run_split_halves(args) -> int:
         if args.block_correlation_correction:
             given["block_correlation_correction"] = True
         settings = Settings(**given, **({"orders": args.order} if args.order is not None else {}))
-        clustering = ClusteringSettings(**({} if args.representative is None
-                                           else {"representative": args.representative}))
+        clustering = ClusteringSettings(**{k: getattr(args, k) for k in ("representative", "shape_representative")
+                                           if getattr(args, k) is not None})
         analysis = Analysis.from_file(args.split_halves, fs=args.fs, format=args.format,
                                       read_options=parse_read_options(args.read_option), outputs=args.outputs,
                                       inputs=args.inputs, settings=settings, clustering=clustering)
@@ -226,6 +226,8 @@ def register(subparsers) -> None:
     g.add_argument("--stop", type=real_option(0), default=None, metavar="S", help="end of that window, s")
     g.add_argument("--representative", choices=("median", "lowest"), default=None,
                    help="which pole of each mode's cluster is compared, as for modaluq identify (default median)")
+    g.add_argument("--shape-representative", choices=("median", "lowest"), default=None,
+                   help="which pole gives each mode's shape, as for modaluq identify (default median)")
     v.add_argument("--out", metavar="DIR", default=None,
                    help="directory for report.md, results.csv, summary.csv, results.npz and the histogram PNGs "
                         "(--split-halves: report.md and pairs.csv)")

@@ -115,12 +115,17 @@ def test_cli_split_halves_reads_the_modes_at_the_representative_asked_for(record
     assert lowest == split_halves(analysis).report()
     assert main(argv) == 0
     assert capsys.readouterr().out != lowest  # the modes are read at other orders
+    assert main([*argv, "--shape-representative", "lowest"]) == 0
+    analysis = Analysis.from_file(csv, settings=SETTINGS,
+                                  clustering=modaluq.ClusteringSettings(shape_representative="lowest"))
+    assert capsys.readouterr().out == split_halves(analysis).report()
 
 
 @pytest.mark.parametrize("argv, message", [
     (["--split-halves", "x.csv", "--records", "3"], "--records: option(s) of the simulation"),
     (["--fs", "10"], "--fs: option(s) of --split-halves FILE"),
     (["--representative", "lowest"], "--representative: option(s) of --split-halves FILE"),
+    (["--shape-representative", "lowest"], "--shape-representative: option(s) of --split-halves FILE"),
     (["--split-halves", "missing.csv"], "missing.csv"),
 ])
 def test_cli_split_halves_options_are_checked(argv, message, capsys):
