@@ -186,15 +186,12 @@ def mac_matrix(shapes, covariances=None, factors=None) -> MacMatrix:
                              f"channels; got shape {v.shape}")
         if not np.isfinite(v).all():
             raise ValueError("factors must be finite")
-        std[np.diag_indices(m)] = 0.0
-        for i in range(m):
-            for j in range(i + 1, m):
-                vij = np.concatenate([v[i], v[j]])  # the joint factor of [Re φ_i, Im φ_i, Re φ_j, Im φ_j]
-                joint = vij @ vij.T
-                std[i, j] = std[j, i] = float(
-                    _core.modal_assurance_statistics_joint(phi[:, i], phi[:, j], 0.5 * (joint + joint.T)).std)
-        return MacMatrix(mac=mac, std=std, independent_approximation=False)
-    if covariances is not None:
+
+        def pair_std(i, j):
+            vij = np.concatenate([v[i], v[j]])  # the joint factor of [Re φ_i, Im φ_i, Re φ_j, Im φ_j]
+            joint = vij @ vij.T
+            return _core.modal_assurance_statistics_joint(phi[:, i], phi[:, j], 0.5 * (joint + joint.T)).std
+    elif covariances is not None:
         c = np.asarray(covariances, dtype=float)
         if c.ndim != 3 or c.shape[0] != m or c.shape[1:] not in ((2 * l, 2 * l), (2 + 2 * l, 2 + 2 * l)):
             raise ValueError(f"covariances must be ({m}, {2 * l}, {2 * l}) shape covariances or ({m}, {2 + 2 * l}, "
@@ -202,8 +199,13 @@ def mac_matrix(shapes, covariances=None, factors=None) -> MacMatrix:
         if c.shape[1] == 2 + 2 * l:
             c = c[:, 2:, 2:]
         c = np.stack([_cov(f"covariances[{k}]", c[k], l) for k in range(m)])
-        std[np.diag_indices(m)] = 0.0
-        for i in range(m):
-            for j in range(i + 1, m):
-                std[i, j] = std[j, i] = float(_core.modal_assurance_statistics(phi[:, i], c[i], phi[:, j], c[j]).std)
-    return MacMatrix(mac=mac, std=std, independent_approximation=True)
+
+        def pair_std(i, j):
+            return _core.modal_assurance_statistics(phi[:, i], c[i], phi[:, j], c[j]).std
+    else:
+        return MacMatrix(mac=mac, std=std, independent_approximation=True)
+    std[np.diag_indices(m)] = 0.0
+    for i in range(m):
+        for j in range(i + 1, m):
+            std[i, j] = std[j, i] = float(pair_std(i, j))
+    return MacMatrix(mac=mac, std=std, independent_approximation=factors is None)

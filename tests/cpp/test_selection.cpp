@@ -124,17 +124,33 @@ TEST_CASE("selection: clusters, one pole per order, minimum size, representative
                          modaluq::invalid_argument);
 }
 
-TEST_CASE("selection: the lowest representative is the lowest reliable member at or above max(k*, 2 m)") {
-    // A mode at orders 4..40 whose frequency drifts with the order (the median member sits at
-    // order 22); order 12's pole is noise-coupled, order 14 cuts close singular values.
+namespace {
+
+// A mode at orders 4..40 whose frequency drifts with the order (the median member sits at
+// order 22); order 12's pole is noise-coupled.
+std::map<Index, std::vector<P>> drifting_mode() {
     std::map<Index, std::vector<P>> by_order;
     for (Index n = 4; n <= 40; n += 2) {
         P p{10.0 + 1e-4 * double(n), 0.02, 0, 0.01 + 1e-4 * double(n)};
         p.coupled = n == 12;
         by_order[n] = {p};
     }
+    return by_order;
+}
+
+// The stable diagram of `by_order` whose order 14 cuts close singular values.
+modaluq::Diagram with_close_cut_at_14(const std::map<Index, std::vector<P>>& by_order) {
     modaluq::Diagram d = all_stable(by_order);
     for (Index i = 0; i < d.poles.size(); ++i) d.poles.close_singular_values(i) = d.poles.order(i) == 14;
+    return d;
+}
+
+}  // namespace
+
+TEST_CASE("selection: the lowest representative is the lowest reliable member at or above max(k*, 2 m)") {
+    // drifting_mode(), order 14 at a close cut
+    std::map<Index, std::vector<P>> by_order = drifting_mode();
+    modaluq::Diagram d = with_close_cut_at_14(by_order);
     modaluq::ClusteringOptions o;
     const auto median = modaluq::select_modes(d, o);
     REQUIRE(median.n_modes() == 1);
@@ -167,8 +183,7 @@ TEST_CASE("selection: the lowest representative is the lowest reliable member at
         by_order[n].push_back({20.0, 0.02, 1});
         by_order[n].push_back({30.0, 0.02, 2});
     }
-    modaluq::Diagram three = all_stable(by_order);
-    for (Index i = 0; i < three.poles.size(); ++i) three.poles.close_singular_values(i) = three.poles.order(i) == 14;
+    modaluq::Diagram three = with_close_cut_at_14(by_order);
     CHECK(lowest_at(three, 0) == 6);
     CHECK(lowest_at(three, 4) == 6);
     CHECK(lowest_at(three, 8) == 8);
@@ -176,17 +191,10 @@ TEST_CASE("selection: the lowest representative is the lowest reliable member at
 }
 
 TEST_CASE("selection: the shape pole gives the shape, its sigma and spreads; f and xi stay the representative's") {
-    // The mode of the test above, its shape turning with the order; k* = 11.
-    std::map<Index, std::vector<P>> by_order;
-    for (Index n = 4; n <= 40; n += 2) {
-        P p{10.0 + 1e-4 * double(n), 0.02, 0, 0.01 + 1e-4 * double(n)};
-        p.coupled = n == 12;
-        by_order[n] = {p};
-    }
-    modaluq::Diagram d = all_stable(by_order);
+    // drifting_mode() with order 14 at a close cut, its shape turning with the order; k* = 11.
+    modaluq::Diagram d = with_close_cut_at_14(drifting_mode());
     d.poles.noise_floor_order = 11;
     for (Index i = 0; i < d.poles.size(); ++i) {
-        d.poles.close_singular_values(i) = d.poles.order(i) == 14;
         d.poles.mode_shape(1, i) += 1e-3 * double(d.poles.order(i));  // each order's shape differs a little
         d.poles.mode_shape_std_real(1, i) = 1e-4 * double(d.poles.order(i));
     }

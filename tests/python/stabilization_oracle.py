@@ -396,11 +396,12 @@ def select_modes_reference(diagram: Diagram, settings: ClusteringSettings | None
         sc_xi = scale(diagram.damping_std, xi_spread[k])
         dist = ((f[candidates] - med) / sc_f) ** 2 + ((xi[candidates] - np.median(xi[members])) / sc_xi) ** 2
         rep[k] = candidates[np.flatnonzero(dist == dist.min())[-1]]  # ties -> the higher order
+        # the lowest sufficient member: the lowest order >= max(k*, 2 m), else the highest
+        above = candidates[order[candidates] >= max(diagram.noise_floor_order, 2 * n_modes)]
+        lowest_member = above.min() if above.size else candidates.max()
         lowest = settings.representative == "lowest"
-        if lowest:  # the lowest order >= max(k*, 2 m), else the highest; that pole's own sigma
-            above = candidates[order[candidates] >= max(diagram.noise_floor_order, 2 * n_modes)]
-            rep[k] = above.min() if above.size else candidates.max()
-        if lowest:
+        if lowest:  # the mode is that pole, its own sigma included
+            rep[k] = lowest_member
             sf_med[k], sxi_med[k] = diagram.frequency_std[rep[k]], diagram.damping_std[rep[k]]
             if diagram.frequency_damping_correlation.size == diagram.n_poles:
                 rho[k] = diagram.frequency_damping_correlation[rep[k]]
@@ -418,10 +419,7 @@ def select_modes_reference(diagram: Diagram, settings: ClusteringSettings | None
             if diagram.frequency_damping_correlation.size == diagram.n_poles:
                 rho[k] = diagram.frequency_damping_correlation[rep[k]]
         # the shape pole: the representative, or the lowest sufficient member (shape_representative)
-        sp[k] = rep[k]
-        if getattr(settings, "shape_representative", "median") == "lowest":
-            above = candidates[order[candidates] >= max(diagram.noise_floor_order, 2 * n_modes)]
-            sp[k] = above.min() if above.size else candidates.max()
+        sp[k] = lowest_member if settings.shape_representative == "lowest" else rep[k]
         ref = int(np.argmax(np.abs(shape[:, sp[k]])))
         aligned = shape[:, members] / shape[ref, members][None, :]
         sh_spread_r[:, k] = np.std(aligned.real, axis=1, ddof=ddof)

@@ -163,10 +163,10 @@ inline const char* to_string(DropReason r) {
 
 /// Modes chosen from a Diagram, sorted by frequency. f and xi are those of one representative
 /// pole, the shape and its sigma those of the shape pole (the representative unless
-/// ClusteringOptions::shape_representative says lowest); frequency_std and damping_std are over the cluster's reliable poles (not
-/// at a close cut, not noise-coupled): the median of their sigma, or the sigma of their mean
-/// (ClusteringOptions::cluster_std); *_spread is the sample std (ddof 1) across the cluster, how
-/// much the estimate moves with the order.
+/// ClusteringOptions::shape_representative says lowest); frequency_std and damping_std are over
+/// the cluster's reliable poles (not at a close cut, not noise-coupled): the median of their
+/// sigma, or the sigma of their mean (ClusteringOptions::cluster_std); *_spread is the sample std
+/// (ddof 1) across the cluster, how much the estimate moves with the order.
 struct SelectedModes {
     Eigen::VectorXd frequency_hz;           ///< Hz
     Eigen::VectorXd damping_ratio;          ///< fraction
