@@ -4,11 +4,12 @@ records of the paper's chain, output-only and input/output, at the true order (1
 engineer's call (`identify(y, u, fs, frequency_range=(1, 20)).select_modes()`). For each true mode:
 the std of the indicator across records against the median reported σ, and for the two-record
 MAC how often the "same mode" test (`modaluq.indicators.mac_test`) rejects at 5 % (should be ~5 %).
-In the engineer's call the selected mode's shape is its cluster's representative pole's
-(`ClusteringSettings.representative`, "median" by default; "lowest" reads it at the lowest order at
-or above the noise floor; "shape-lowest" keeps the median representative's f and ξ and reads only
-the shape there, `ClusteringSettings.shape_representative`); the table also gives the coverage of f ± 1.96 σ_f and ξ ± 1.96 σ_ξ of the
-mode around the records' mean.
+In the engineer's call the third argument picks the pole a mode is read at: "median", the
+median representative for f, ξ and the shape (the package's default before 2026-11-27); "lowest",
+the lowest order at or above the noise floor for all of them (`ClusteringSettings.representative`);
+"shape-lowest", the median representative's f and ξ and the shape there
+(`ClusteringSettings.shape_representative`, the package's default since 2026-11-27). The table also
+gives the coverage of f ± 1.96 σ_f and ξ ± 1.96 σ_ξ of the mode around the records' mean.
 A fourth argument picks the structure: "chain" (the paper's, default) or "frame" (a 4-storey
 chain driven at its first and last floors by two measured inputs, modaluq.simulate(n_dof=4,
 input_dofs=(0, 3)), true order 8).

@@ -259,15 +259,20 @@ def _table(selected) -> str:
             std = getattr(selected, std_name, None)
             indicators[name] = (np.asarray(values, float),
                                 np.full(selected.n_modes, np.nan) if std is None else np.asarray(std, float))
+    # the order the shape (and MPC, MPD, MAC) is read at, when it is not the representative's
+    shape_order = getattr(selected, "shape_order", None)
+    with_shape_order = shape_order is not None and np.any(np.asarray(shape_order) != selected.representative_order)
     for k in range(selected.n_modes):
         cells = [str(k + 1), f"{selected.frequency_hz[k]:.5g}", _fmt(float(selected.frequency_std[k]), 3),
                  _fmt(float(selected.frequency_spread[k]), 3), f"{100 * selected.damping_ratio[k]:.4g}",
                  _fmt(100 * float(selected.damping_std[k]), 3), _fmt(100 * float(selected.damping_spread[k]), 3),
                  str(int(selected.representative_order[k])), str(int(selected.n_poles[k]))]
+        cells += [str(int(shape_order[k]))] if with_shape_order else []
         cells += [f"{_fmt(v[k], 3)} ± {_fmt(sd[k], 2)}" for v, sd in indicators.values()]
         cells.append("noise?" if flags[k] else "")
         rows.append("<tr>" + "".join(f"<td>{html.escape(c)}</td>" for c in cells) + "</tr>")
     head = ["mode", "f [Hz]", "σ f [Hz]", "spread f", "ξ [%]", "σ ξ [%]", "spread ξ", "order", "poles"]
+    head += ["shape order"] if with_shape_order else []
     head += [f"{INDICATOR_COLUMNS[n][0]} ± σ" for n in indicators] + [""]
     return ("<table><thead><tr>" + "".join(f"<th>{html.escape(h)}</th>" for h in head) + "</tr></thead><tbody>"
             + "".join(rows) + "</tbody></table>")

@@ -102,8 +102,9 @@ class SelectedModes:
 
     Each mode is one cluster of poles. Its ``frequency_hz`` and ``damping_ratio`` are those of
     one **representative** pole, its ``mode_shape`` and the shape's σ those of the **shape pole**
-    (the representative, unless ``settings.shape_representative`` is ``"lowest"``; analytic,
-    delta-method σ at ``shape_order``); ``frequency_std`` and ``damping_std`` are the cluster's
+    (by default the cluster's pole at the lowest sufficient order, or the representative when
+    that is lower, ``settings.shape_representative``; analytic, delta-method σ at
+    ``shape_order``); ``frequency_std`` and ``damping_std`` are the cluster's
     (``settings.cluster_std``: the median of its reliable poles' σ, or the σ of their mean);
     the ``*_spread`` fields are the sample standard deviations (ddof=1) across the cluster's
     members, a measure of the order-to-order scatter shown beside the analytic σ (0 for a
@@ -170,8 +171,8 @@ class SelectedModes:
     #: simulated chain's 1.93 Hz mode on 20,000 samples); tables mark it, exports carry the flag.
     noise_coupled: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
     #: (n_modes, 2+2l, 2+2l) covariance of [f, ξ, Re shape, Im shape] of each shape pole
-    #: (``Diagram.pole_covariance``; the representative's unless ``shape_representative`` picks
-    #: another), or None without uncertainty. With ``settings.cluster_std == "mean"``, or a shape
+    #: (``Diagram.pole_covariance``; the representative's when ``shape_representative`` is
+    #: ``"median"``), or None without uncertainty. With ``settings.cluster_std == "mean"``, or a shape
     #: pole other than the representative, its f and ξ entries are the mode's: the [f, ξ] block from
     #: ``frequency_std``, ``damping_std`` and ``frequency_damping_correlation``, and their
     #: covariance with the shape the pole's correlation at those σ (the mean is formed for f and ξ only).
@@ -191,7 +192,8 @@ class SelectedModes:
     #: noise, so any of these modes may be noise (the table's heading says so)
     low_signal_to_noise: bool = False
     #: (n_modes,) index in the diagram of the pole whose shape and shape σ the mode reports
-    #: (``settings.shape_representative``): ``representative_pole`` unless ``"lowest"``
+    #: (``settings.shape_representative``): by default the lowest sufficient member (the
+    #: representative when that is lower), with ``"median"`` ``representative_pole``
     shape_pole: np.ndarray | None = None
     shape_order: np.ndarray | None = None  #: (n_modes,) its model order
 
@@ -294,8 +296,8 @@ class SelectedModes:
                 "spread: across the cluster)\n"
         s += self.table()
         if self.settings.shape_representative == "lowest" and self.settings.representative != "lowest":
-            s += ("\nshapes: each cluster's pole at the lowest sufficient order, with its own std (orders "
-                  + ", ".join(str(int(o)) for o in self.shape_order) + ")")
+            s += ("\nshapes: each cluster's pole at the lowest sufficient order (the representative's if lower), "
+                  "with its own std (orders " + ", ".join(str(int(o)) for o in self.shape_order) + ")")
         if self.dropped_n_poles.size:
             # counted by the core's code of each
             too_small = self.dropped_code.count(DropReason.TOO_FEW_POLES)
@@ -451,8 +453,8 @@ def select_modes(diagram, settings: ClusteringSettings | None = None, **kwargs) 
 
 
 def _shape_indicators(diagram, modes: SelectedModes) -> dict:
-    """The covariances of the shape poles (the representatives unless ``shape_representative``
-    says otherwise; from the diagram's identification) and the MPC and MPD of every selected shape
+    """The covariances of the shape poles (by default the lowest sufficient members,
+    ``shape_representative``; from the diagram's identification) and the MPC and MPD of every selected shape
     with their σ. Where the f and ξ come from another pole, or from the cluster's mean, the
     covariance's [f, ξ] block is the mode's (:func:`_with_cluster_std`)."""
     covs = None

@@ -470,12 +470,15 @@ class ClusteringSettings:
         their σ read (docs/shapes.md §6: on the paper's chain, 200 records, the σ of MPC and MAC
         of modes 2–4 and 6 input/output and 2–3 output-only go from 0.01–0.83 of their scatter
         to 0.96–1.26).
-    shape_representative : {"median", "lowest"}
-        Which member gives each mode's shape and the shape's σ (``SelectedModes.shape_pole``),
-        by the same two rules; f, ξ and their σ stay the representative's. ``"median"``
-        (default): the representative itself. ``"lowest"``: the cluster's reliable member at the
-        lowest order n ≥ max(k*, 2m), where the shape's first-order σ is calibrated, while the
-        representative's f and ξ keep the cluster's σ (docs/shapes.md §6). With
+    shape_representative : {"lowest", "median"}
+        Which member gives each mode's shape and the shape's σ (``SelectedModes.shape_pole``);
+        f, ξ and their σ stay the representative's. ``"lowest"`` (default): the cluster's
+        reliable member at the lowest order n ≥ max(k*, 2m), where the shape's first-order σ is
+        calibrated, unless the representative's order is lower (a high noise floor k*: the shape
+        is never read above the representative). The median member, far above the true order,
+        has too small a shape σ: on the paper's chain the σ of MPC and MAC go from 0.01–0.83 of
+        their scatter to 0.96–1.26 (docs/shapes.md §6, with the measured records' split halves).
+        ``"median"``: the representative itself (the choice before 2026-11-27). With
         ``representative="lowest"`` both are that pole.
     """
 

@@ -199,9 +199,11 @@ TEST_CASE("selection: the shape pole gives the shape, its sigma and spreads; f a
         d.poles.mode_shape_std_real(1, i) = 1e-4 * double(d.poles.order(i));
     }
     modaluq::ClusteringOptions o;
+    const auto s = modaluq::select_modes(d, o);  // the default: shape at the lowest sufficient order
+    CHECK(o.shape_representative == modaluq::Representative::lowest);
+    o.shape_representative = modaluq::Representative::median;
     const auto median = modaluq::select_modes(d, o);
     o.shape_representative = modaluq::Representative::lowest;
-    const auto s = modaluq::select_modes(d, o);
     o.representative = modaluq::Representative::lowest;
     const auto lowest = modaluq::select_modes(d, o);
     REQUIRE(s.n_modes() == 1);
@@ -223,6 +225,16 @@ TEST_CASE("selection: the shape pole gives the shape, its sigma and spreads; f a
     CHECK(s.mode_shape_spread_real.col(0) == lowest.mode_shape_spread_real.col(0));
     CHECK(s.mode_shape.col(0) != median.mode_shape.col(0));
     CHECK(s.members == median.members);
+    // a noise floor above the representative (order 22): the lowest sufficient member, order 26,
+    // is higher, and the shape stays the representative's
+    d.poles.noise_floor_order = 25;
+    o.representative = modaluq::Representative::median;
+    const auto high_floor = modaluq::select_modes(d, o);
+    REQUIRE(high_floor.n_modes() == 1);
+    CHECK(high_floor.representative_order(0) == 22);
+    CHECK(high_floor.shape_pole(0) == high_floor.representative_pole(0));
+    o.representative = modaluq::Representative::lowest;
+    CHECK(modaluq::select_modes(d, o).representative_order(0) == 26);
 }
 
 TEST_CASE("selection: a cluster whose frequency is less certain than its peak's bandwidth is dropped") {

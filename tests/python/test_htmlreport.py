@@ -120,6 +120,20 @@ def test_the_table_shows_mpc_and_mpd_with_their_sigma(tmp_path, chain):
     assert "MPC ± σ" not in text and "MPD [°] ± σ" not in text
 
 
+def test_the_table_gives_the_shape_order_where_it_is_not_the_representatives(tmp_path, chain):
+    result = modaluq.identify(chain.y, fs=chain.fs, block_rows=15, orders=range(2, 31, 2))
+    d = result.stabilization_diagram()
+    sel = d.select_modes()  # the default: shapes at the lowest sufficient order
+    k = int(np.flatnonzero(sel.shape_order != sel.representative_order)[0])
+    text = write_html_report(tmp_path / "a.html", d, sel).read_text(encoding="utf-8")
+    assert "<th>shape order</th>" in text
+    row = (f"<td>{int(sel.representative_order[k])}</td><td>{int(sel.n_poles[k])}</td>"
+           f"<td>{int(sel.shape_order[k])}</td>")
+    assert row in text
+    at_rep = d.select_modes(shape_representative="median")
+    assert "shape order" not in write_html_report(tmp_path / "b.html", d, at_rep).read_text(encoding="utf-8")
+
+
 def test_refusals(tmp_path, chain):
     result = modaluq.identify(chain.y, fs=chain.fs, block_rows=15, orders=range(2, 31, 2))
     d = result.stabilization_diagram()

@@ -185,6 +185,7 @@ def test_the_merged_selection_reports_the_sigma_of_the_cluster_mean(campaign):
     diagram = res.stabilization_diagram()
     sel = res.select_modes()
     median = diagram.select_modes(cluster_std="median")
+    median_at_rep = diagram.select_modes(cluster_std="median", shape_representative="median")
     assert sel.settings.cluster_std == "mean" and median.settings.cluster_std == "median"
     assert "of the mean over the cluster" in str(sel)
     for other in (diagram.select_modes(), modaluq.select_modes(diagram), diagram.select_modes(cluster_std="mean")):
@@ -206,24 +207,30 @@ def test_the_merged_selection_reports_the_sigma_of_the_cluster_mean(campaign):
         assert median.frequency_std[k] == np.median(diagram.frequency_std[reliable])
         # never above the members' mean σ (Cauchy-Schwarz)
         assert sf <= np.mean(diagram.frequency_std[reliable]) * (1 + 1e-12)
-        # the mode's covariance: its [f, ξ] block is the mean's, the shape block the representative's
-        cov, own = sel.mode_covariance[k], diagram.pole_covariance(sel.representative_pole[k])
+        # the mode's covariance: its [f, ξ] block is the mean's, the shape block the shape pole's
+        # (by default the lowest sufficient member)
+        cov, own = sel.mode_covariance[k], diagram.pole_covariance(sel.shape_pole[k])
         rho = sel.frequency_damping_correlation[k]
         np.testing.assert_allclose(cov[:2, :2], [[sf * sf, rho * sf * sx], [rho * sf * sx, sx * sx]], rtol=1e-9)
         np.testing.assert_array_equal(cov[2:, 2:], own[2:, 2:])
         np.testing.assert_allclose(cov[0, 2:], own[0, 2:] * sf / np.sqrt(own[0, 0]), rtol=1e-12)
-        np.testing.assert_array_equal(median.mode_covariance[k], own)
+        np.testing.assert_array_equal(median.mode_covariance[k][2:, 2:], own[2:, 2:])
+        # with the shape read at the representative and the median σ, the representative's covariance
+        np.testing.assert_array_equal(median_at_rep.mode_covariance[k],
+                                      diagram.pole_covariance(sel.representative_pole[k]))
     # the merged poles decorrelate across orders: the mean's σ is mostly below one order's
     assert np.median(sel.frequency_std / median.frequency_std) < 1.0
 
 
 def test_one_record_keeps_the_median(campaign):
     """identify's selection is unchanged: the median of the reliable members' σ, bit for bit, and
-    the representative's covariance and f-ξ correlation."""
+    the representative's f-ξ correlation; the covariance is the shape pole's with that [f, ξ]
+    block, and the representative's own with shape_representative="median"."""
     s = campaign.setups[0]
     res = modaluq.identify(s.y, fs=campaign.fs, block_rows=15, orders=ORDERS, n_blocks=20)
     diagram = res.stabilization_diagram()
     sel = res.select_modes()
+    at_rep = diagram.select_modes(shape_representative="median")
     assert sel.settings.cluster_std == "median"
     assert "median over the cluster" in str(sel)
     assert diagram.frequency_damping_factor.shape == (diagram.n_poles, 2, res.n_blocks)  # kept all the same
@@ -234,7 +241,14 @@ def test_one_record_keeps_the_median(campaign):
         assert sel.damping_std[k] == np.median(diagram.damping_std[reliable])
         rep = sel.representative_pole[k]
         assert sel.frequency_damping_correlation[k] == diagram.frequency_damping_correlation[rep]
-        np.testing.assert_array_equal(sel.mode_covariance[k], diagram.pole_covariance(rep))
+        np.testing.assert_array_equal(at_rep.mode_covariance[k], diagram.pole_covariance(rep))
+        shape_cov = diagram.pole_covariance(sel.shape_pole[k])
+        np.testing.assert_array_equal(sel.mode_covariance[k][2:, 2:], shape_cov[2:, 2:])
+        if sel.shape_pole[k] != rep:  # [f, ξ]: the mode's σ with the representative's correlation
+            sf, sx, rho = sel.frequency_std[k], sel.damping_std[k], sel.frequency_damping_correlation[k]
+            np.testing.assert_allclose(sel.mode_covariance[k][:2, :2], [[sf * sf, rho * sf * sx], [rho * sf * sx, sx * sx]],
+                                       rtol=1e-12)
+    assert np.any(sel.shape_pole != sel.representative_pole)
     # asked for, the mean is available for one record too
     mean = diagram.select_modes(cluster_std="mean")
     np.testing.assert_array_equal(mean.frequency_hz, sel.frequency_hz)

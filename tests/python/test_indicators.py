@@ -128,12 +128,19 @@ def test_selected_modes_carry_covariance_and_indicators():
     assert sel.n_modes >= 5
     l = sim.y.shape[1]
     assert sel.mode_covariance.shape == (sel.n_modes, 2 + 2 * l, 2 + 2 * l)
-    for k, pole in enumerate(sel.representative_pole):
-        order = sel.representative_order[k]
+    # the shape pole's (by default the lowest sufficient member's) covariance; its [f, ξ] block is the mode's
+    assert np.any(sel.shape_pole != sel.representative_pole)
+    for k, pole in enumerate(sel.shape_pole):
+        order = sel.shape_order[k]
         m = next(m for m in result.modes if m.order == order)
-        i = int(np.flatnonzero(m.frequency_hz == sel.frequency_hz[k])[0])
-        np.testing.assert_array_equal(sel.mode_covariance[k], m.covariance[i])
+        i = int(np.flatnonzero(m.frequency_hz == diagram.frequency_hz[pole])[0])
+        np.testing.assert_array_equal(sel.mode_covariance[k][2:, 2:], m.covariance[i][2:, 2:])
         np.testing.assert_array_equal(diagram.pole_covariance(pole), m.covariance[i])
+        if pole == sel.representative_pole[k]:
+            np.testing.assert_array_equal(sel.mode_covariance[k], m.covariance[i])
+        else:
+            assert sel.mode_covariance[k][0, 0] == sel.frequency_std[k] ** 2
+            assert sel.mode_covariance[k][1, 1] == sel.damping_std[k] ** 2
         # the shape std on the diagonal
         np.testing.assert_allclose(np.sqrt(np.diag(sel.mode_covariance[k])[2:2 + l]), sel.mode_shape_std_real[:, k],
                                    rtol=1e-12)
@@ -297,7 +304,7 @@ def _check_factors_against_covariances(sel):
 
 
 @pytest.mark.parametrize("cluster_std", ["median", "mean"])
-def test_selected_modes_carry_their_representatives_shape_factors(cluster_std):
+def test_selected_modes_carry_their_shape_poles_shape_factors(cluster_std):
     sim = modaluq.simulate(20000, seed=2)
     r = modaluq.identify(sim.y, fs=sim.fs, block_rows=10, orders=range(2, 25, 2), n_blocks=50,
                          keep_shape_factor=True)
@@ -305,7 +312,7 @@ def test_selected_modes_carry_their_representatives_shape_factors(cluster_std):
     sel = modaluq.select_modes(diagram, cluster_std=cluster_std)
     assert sel.n_modes >= 4 and sel.mode_shape_factor is not None
     _check_factors_against_covariances(sel)
-    for k, p in enumerate(sel.representative_pole):
+    for k, p in enumerate(sel.shape_pole):
         np.testing.assert_array_equal(sel.mode_shape_factor[k], diagram.pole_shape_factor(int(p)))
     mm = sel.mac_matrix()
     assert not mm.independent_approximation

@@ -27,26 +27,32 @@ def _tdms_path():
 
 
 def _cases():
-    """name -> a function making a run Analysis (the simulated chain and the wind-turbine record)."""
+    """name -> a function making a run Analysis (the simulated chain and the wind-turbine record).
+    Each mode's shape is read at its representative (``shape_representative="median"``), as when the
+    expected output was written: the words are compared, and the default's extra "shapes:" line
+    is tested in test_stabilization.py."""
     import modaluq
     from modaluq import Analysis, Settings
+
+    def clustering_of(**kw):
+        return modaluq.ClusteringSettings(**{"shape_representative": "median", **kw})
 
     def chain(n_samples, seed, clustering=None, **settings):
         def make():
             sim = modaluq.simulate(n_samples, seed=seed)
             return Analysis.from_arrays(sim.y, fs=sim.fs, settings=Settings(**settings),
-                                        clustering=modaluq.ClusteringSettings(**(clustering or {}))).run(
+                                        clustering=clustering_of(**(clustering or {}))).run(
                 check_harmonics=False, issue_warnings=False)
         return make
 
     def chain_io():
         sim = modaluq.simulate(50_000, seed=2)
-        return Analysis.from_arrays(sim.y, sim.u, fs=sim.fs, settings=Settings(block_rows=21, orders=range(2, 61, 2))
-                                    ).run(check_harmonics=False, issue_warnings=False)
+        return Analysis.from_arrays(sim.y, sim.u, fs=sim.fs, settings=Settings(block_rows=21, orders=range(2, 61, 2)),
+                                    clustering=clustering_of()).run(check_harmonics=False, issue_warnings=False)
 
     def turbine():  # as docs/tutorial.md §9 runs it: modaluq identify ... --frequency-range 0.2 5
-        return Analysis.from_file(_tdms_path(), settings=Settings(frequency_range=(0.2, 5))).run(
-            check_harmonics=False, issue_warnings=False)
+        return Analysis.from_file(_tdms_path(), settings=Settings(frequency_range=(0.2, 5)),
+                                  clustering=clustering_of()).run(check_harmonics=False, issue_warnings=False)
 
     return {
         "chain_slow_mode": chain(20_000, 3, orders=tuple(range(2, 25, 2)), n_blocks=200),
@@ -60,11 +66,22 @@ def _cases():
     }
 
 
+SHAPES_LINE = "shapes: each cluster's pole at the lowest sufficient order"
+
+
+def _without_shapes_line(text: str) -> str:
+    """``str(Result)`` selects with the default clustering, whose "shapes:" line (the shape
+    orders, since shape_representative="lowest" became the default) came after the expected
+    output; the test below checks that the line is there."""
+    return "\n".join(line for line in text.split("\n") if not line.startswith(SHAPES_LINE))
+
+
 def _printed(a) -> dict:
     """Everything a run prints that words the core's findings."""
     sel = a.selected
     return {"analysis": str(a), "warnings": list(a.warnings), "result_warnings": list(a.result.warnings),
-            "result": str(a.result), "selected": str(sel), "dropped_reason": list(sel.dropped_reason)}
+            "result": _without_shapes_line(str(a.result)), "selected": str(sel),
+            "dropped_reason": list(sel.dropped_reason)}
 
 
 
@@ -124,6 +141,16 @@ def _printed_on_the_baseline(name):
 @pytest.mark.parametrize("name", CASES)
 def test_the_printed_output_is_what_it_was_when_python_showed_the_cores_words(name, expected):
     assert _printed_on_the_baseline(name) == expected[name]
+
+
+def test_the_results_table_ends_with_the_shape_orders():
+    a = _run("chain_io")
+    text = str(a.result)
+    sel = a.result.select_modes()
+    line = [x for x in text.split("\n") if x.startswith(SHAPES_LINE)]
+    assert line == [f"{SHAPES_LINE} (the representative's if lower), with its own std (orders "
+                    + ", ".join(str(int(o)) for o in sel.shape_order) + ")"]
+    assert SHAPES_LINE not in str(a.selected)  # the cases read the shapes at the representative
 
 
 @pytest.mark.parametrize("name", CASES)

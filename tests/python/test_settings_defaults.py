@@ -79,9 +79,9 @@ def test_not_set_and_enums_cross_both_ways():
     assert ClusteringSettings().to_core().min_cluster_size == 0
     assert d["representative"] == "median"
     assert ClusteringSettings(representative="lowest").to_core().representative == _core.Representative.lowest
-    assert d["shape_representative"] == "median"
-    assert (ClusteringSettings(shape_representative="lowest").to_core().shape_representative
-            == _core.Representative.lowest)
+    assert d["shape_representative"] == "lowest"
+    assert (ClusteringSettings(shape_representative="median").to_core().shape_representative
+            == _core.Representative.median)
     o = Settings(block_rows=10, orders=[4, 2], n_blocks=20, references=[1], past_block_rows=None).to_core(50.0)
     assert (o.fs, o.block_rows, o.past_block_rows, o.orders, o.references) == (50.0, 10, 0, [2, 4], [1])
     assert StabilityCriteria(frequency_std_factor=None).to_core().frequency_std_factor is None
@@ -93,7 +93,7 @@ def test_to_dict_and_record_are_unchanged():
         "per_cluster_min_size": False, "max_frequency_std_per_bandwidth": 1.0, "merge_fragments": True,
         "drop_doublets": True, "doublet_window": 0.05, "doublet_min_mac": 0.8, "fragment_std_factor": 3.0,
         "fragment_min_mac": 0.8, "fragment_max_shared": 0.25, "statuses": ["stable"], "linkage": "average",
-        "cluster_std": None, "representative": "median", "shape_representative": "median"}
+        "cluster_std": None, "representative": "median", "shape_representative": "lowest"}
     assert StabilityCriteria().to_dict() == {
         "max_frequency_change": 0.01, "max_damping_change": 0.1, "min_mac": 0.98, "frequency_std_factor": 2.0,
         "max_frequency_cov": 0.05, "min_damping_ratio": 0.0, "max_damping_ratio": 0.2, "damping_std_factor": 2.0,

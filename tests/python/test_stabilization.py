@@ -437,12 +437,13 @@ def test_chain_selection_reports_consistent_members_and_spread(chain_selection):
         assert sel.representative_pole[k] in members
         assert sel.frequency_spread[k] == pytest.approx(np.std(diagram.frequency_hz[members], ddof=1), rel=1e-12)
         assert sel.n_poles[k] == members.size >= sel.min_cluster_size
-        i = sel.representative_pole[k]
         # σ: the median over the cluster's reliable poles (robust to the order it is read at)
         reliable = members[~(diagram.close_singular_values[members] | diagram.noise_coupled[members])]
         assert sel.frequency_std[k] == np.median(diagram.frequency_std[reliable])
         assert sel.damping_std[k] == np.median(diagram.damping_std[reliable])
-        np.testing.assert_array_equal(sel.mode_shape[:, k], diagram.mode_shape[:, i])
+        # the shape: the shape pole's, a reliable member (by default the lowest sufficient one)
+        assert sel.shape_pole[k] in reliable
+        np.testing.assert_array_equal(sel.mode_shape[:, k], diagram.mode_shape[:, sel.shape_pole[k]])
 
 
 def test_chain_lowest_representative_is_one_pole_read_at_the_lowest_sufficient_order(chain_selection):
@@ -468,23 +469,25 @@ def test_chain_lowest_representative_is_one_pole_read_at_the_lowest_sufficient_o
 
 
 def test_chain_shape_pole_gives_the_shape_and_the_representative_f_and_xi(chain_selection):
-    """shape_representative="lowest": f, ξ and their σ are the default's; the shape, its σ and its
-    covariance block are those of the pole representative="lowest" reads; the covariance's [f, ξ]
-    block is the mode's, its f-shape rows the shape pole's correlations at the mode's σ."""
-    _, diagram, sel = chain_selection
+    """The default shape_representative="lowest": f, ξ and their σ are those of
+    shape_representative="median" (the representative's); the shape, its σ and its covariance block
+    are those of the pole representative="lowest" reads; the covariance's [f, ξ] block is the
+    mode's, its f-shape rows the shape pole's correlations at the mode's σ."""
+    _, diagram, hyb = chain_selection
+    assert hyb.settings.shape_representative == "lowest"
     low = diagram.select_modes(representative="lowest")
-    hyb = diagram.select_modes(shape_representative="lowest")
-    assert [list(m) for m in hyb.members] == [list(m) for m in sel.members]
+    med = diagram.select_modes(shape_representative="median")
+    assert [list(m) for m in hyb.members] == [list(m) for m in med.members]
     for name in ("frequency_hz", "damping_ratio", "frequency_std", "damping_std", "representative_pole"):
-        np.testing.assert_array_equal(getattr(hyb, name), getattr(sel, name), err_msg=name)
+        np.testing.assert_array_equal(getattr(hyb, name), getattr(med, name), err_msg=name)
     np.testing.assert_array_equal(hyb.shape_pole, low.representative_pole)
     np.testing.assert_array_equal(hyb.shape_order, diagram.order[hyb.shape_pole])
     np.testing.assert_array_equal(hyb.mode_shape, low.mode_shape)
     np.testing.assert_array_equal(hyb.mode_shape_std_real, low.mode_shape_std_real)
     np.testing.assert_array_equal(hyb.mpc_std, low.mpc_std)
-    np.testing.assert_array_equal(sel.shape_pole, sel.representative_pole)  # the default: one pole
+    np.testing.assert_array_equal(med.shape_pole, med.representative_pole)  # "median": one pole
     assert "shapes: each cluster's pole at the lowest sufficient order" in str(hyb)
-    assert "shapes:" not in str(sel) and "shapes:" not in str(low)
+    assert "shapes:" not in str(med) and "shapes:" not in str(low)
     assert np.any(hyb.shape_pole != hyb.representative_pole)
     for k, p in enumerate(hyb.shape_pole):
         own = diagram.pole_covariance(int(p))

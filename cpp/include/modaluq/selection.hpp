@@ -101,11 +101,13 @@ struct ClusteringOptions {
     std::vector<PoleStatus> statuses{PoleStatus::stable};  ///< which poles are clustered
     Linkage linkage = Linkage::average;  ///< see detail/linkage.hpp
     Representative representative = Representative::median;  ///< see Representative
-    /// The member that gives each mode's shape and its sigma (SelectedModes::shape_pole), by the
-    /// same rules: median, the representative itself; lowest, the lowest reliable member at an order
-    /// n >= max(k*, 2 m), whose shape sigma is calibrated where the representative's, far above the
-    /// true order, is too small (docs/shapes.md §6). With representative lowest both are that pole.
-    Representative shape_representative = Representative::median;
+    /// The member that gives each mode's shape and its sigma (SelectedModes::shape_pole). Default
+    /// lowest: the lowest reliable member at an order n >= max(k*, 2 m), whose shape sigma is
+    /// calibrated where the median member's, often far above the true order, is too small because
+    /// the noise directions there are frozen (docs/shapes.md §6); the representative itself when
+    /// that member's order is not below the representative's. median: the representative. With
+    /// representative lowest both are that pole.
+    Representative shape_representative = Representative::lowest;
     /// The sigma of f and xi reported per mode (SelectedModes::frequency_std, damping_std,
     /// frequency_damping_correlation); the clusters, the representative and its value, and the
     /// tests on the poles' own sigma (max_frequency_std_per_bandwidth, merge_fragments) do not
@@ -607,7 +609,13 @@ inline SelectedModes select_modes(const Diagram& diagram, const ClusteringOption
             for (Index i : candidates)  // ascending order: "<=" hands ties to the higher order
                 if (distance(i) <= distance(rep)) rep = i;
         }
-        const Index shape_rep = options.shape_representative == Representative::lowest ? lowest_member : rep;
+        // The shape is read lower, never higher, than the representative: where most of a cluster
+        // lies below k* (measured records whose noise floor is high), orders above the
+        // representative add noise states to the shape, not calibration.
+        const Index shape_rep =
+            options.shape_representative == Representative::lowest && P.order(lowest_member) < P.order(rep)
+                ? lowest_member
+                : rep;
         // "lowest" reports one order's identification, sigma included; "median" the cluster's sigma
         s.frequency_std(k) = sf.empty() || lowest ? P.frequency_std(rep) : detail::median(sf);
         s.damping_std(k) = sxi.empty() || lowest ? P.damping_std(rep) : detail::median(sxi);
