@@ -108,6 +108,30 @@ def test_the_http_servers_dask_opens_are_closed_and_no_comm_port_speaks_http(sta
 
 
 @pytest.mark.slow
+def _listening_ports(driver) -> set:
+    """The TCP ports the driver and its descendants listen on. A short-lived child (a spawn
+    helper) can exit between the listing and the look at its sockets: it is skipped, and the
+    listing is taken again until two agree."""
+    def once():
+        ports = set()
+        for p in [driver, *driver.children(recursive=True)]:
+            try:
+                ports |= {(c.laddr.ip, c.laddr.port) for c in p.net_connections("tcp") if c.status == psutil.CONN_LISTEN}
+            except psutil.NoSuchProcess:
+                if p.pid == driver.pid:
+                    raise
+        return ports
+
+    previous, deadline = once(), time.time() + 10
+    while time.time() < deadline:
+        time.sleep(0.2)
+        current = once()
+        if current == previous:
+            return current
+        previous = current
+    return previous
+
+
 def test_while_modaluq_monitor_workers_2_runs_only_its_tls_comm_ports_listen(tmp_path):
     """What `ss -ltnp` shows during `modaluq monitor --workers 2`: the listeners of the driver (scheduler,
     nannies) and of its worker processes are 5 TLS ports on 127.0.0.1, none answering HTTP."""
@@ -123,9 +147,7 @@ def test_while_modaluq_monitor_workers_2_runs_only_its_tls_comm_ports_listen(tmp
         while time.time() < deadline and len(list((tmp_path / "tracks.parts").glob("*.json"))) < 2:
             time.sleep(0.05)  # settings.json + a record: the cluster is up and running records
         driver = psutil.Process(proc.pid)
-        processes = [driver, *driver.children(recursive=True)]
-        listening = {(c.laddr.ip, c.laddr.port) for p in processes for c in p.net_connections("tcp")
-                     if c.status == psutil.CONN_LISTEN}
+        listening = _listening_ports(driver)
         assert proc.poll() is None, "the run ended before its listeners could be seen"
         assert len(listening) == 5 and {ip for ip, _ in listening} == {"127.0.0.1"}, listening
         for _, port in sorted(listening):
