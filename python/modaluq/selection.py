@@ -102,8 +102,8 @@ class SelectedModes:
 
     Each mode is one cluster of poles. Its ``frequency_hz`` and ``damping_ratio`` are those of
     one **representative** pole, its ``mode_shape`` and the shape's σ those of the **shape pole**
-    (by default the cluster's pole at the lowest sufficient order, or the representative when
-    that is lower, ``settings.shape_representative``; analytic, delta-method σ at
+    (by default the cluster's pole at the lowest sufficient order, or the representative where it
+    is lower and holds every selected mode, ``settings.shape_representative``; analytic, delta-method σ at
     ``shape_order``); ``frequency_std`` and ``damping_std`` are the cluster's
     (``settings.cluster_std``: the median of its reliable poles' σ, or the σ of their mean);
     the ``*_spread`` fields are the sample standard deviations (ddof=1) across the cluster's
@@ -193,7 +193,7 @@ class SelectedModes:
     low_signal_to_noise: bool = False
     #: (n_modes,) index in the diagram of the pole whose shape and shape σ the mode reports
     #: (``settings.shape_representative``): by default the lowest sufficient member (the
-    #: representative when that is lower), with ``"median"`` ``representative_pole``
+    #: representative where it is lower and of order ≥ 2 m), with ``"median"`` ``representative_pole``
     shape_pole: np.ndarray | None = None
     shape_order: np.ndarray | None = None  #: (n_modes,) its model order
 
@@ -296,7 +296,7 @@ class SelectedModes:
                 "spread: across the cluster)\n"
         s += self.table()
         if self.settings.shape_representative == "lowest" and self.settings.representative != "lowest":
-            s += ("\nshapes: each cluster's pole at the lowest sufficient order (the representative's if lower), "
+            s += ("\nshapes: each cluster's pole at the lowest sufficient order (the representative's where lower and of order >= 2 x modes), "
                   "with its own std (orders " + ", ".join(str(int(o)) for o in self.shape_order) + ")")
         if self.dropped_n_poles.size:
             # counted by the core's code of each

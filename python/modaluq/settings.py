@@ -474,8 +474,9 @@ class ClusteringSettings:
         Which member gives each mode's shape and the shape's σ (``SelectedModes.shape_pole``);
         f, ξ and their σ stay the representative's. ``"lowest"`` (default): the cluster's
         reliable member at the lowest order n ≥ max(k*, 2m), where the shape's first-order σ is
-        calibrated, unless the representative's order is lower (a high noise floor k*: the shape
-        is never read above the representative). The median member, far above the true order,
+        calibrated, unless the representative is lower and its order holds every selected mode
+        (≥ 2m: a measured record whose noise floor k* is far above the modes' order, where the
+        member above k* is the worse shape). The median member, far above the true order,
         has too small a shape σ: on the paper's chain the σ of MPC and MAC go from 0.01–0.83 of
         their scatter to 0.96–1.26 (docs/shapes.md §6, with the measured records' split halves).
         ``"median"``: the representative itself (the choice before 2026-11-27). With

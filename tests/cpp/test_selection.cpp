@@ -237,6 +237,28 @@ TEST_CASE("selection: the shape pole gives the shape, its sigma and spreads; f a
     CHECK(modaluq::select_modes(d, o).representative_order(0) == 26);
 }
 
+TEST_CASE("selection: a representative below 2 m never gives the shape") {
+    // Four modes over orders 4..40 (2 m = 8, k* = 0). The 10 Hz mode's frequency is the median at
+    // order 6, so its representative is order 6, which cannot hold four modes: the shape is the
+    // lowest sufficient member's, order 8, though 8 is above the representative.
+    std::map<Index, std::vector<P>> by_order;
+    for (Index n = 4; n <= 40; n += 2) {
+        const double s = n == 6 ? 0.0 : n <= 22 ? -double(n) : double(n);  // 9 below, 9 above order 6's
+        by_order[n] = {{10.0 + 1e-4 * s, 0.02, 0}, {20.0, 0.02, 1}, {30.0, 0.02, 2}, {40.0, 0.02, 3}};
+    }
+    modaluq::Diagram d = all_stable(by_order);
+    for (Index i = 0; i < d.poles.size(); ++i) d.poles.mode_shape(1, i) += 1e-3 * double(d.poles.order(i));
+    modaluq::ClusteringOptions o;
+    o.drop_doublets = false;
+    const auto s = modaluq::select_modes(d, o);
+    REQUIRE(s.n_modes() == 4);
+    CHECK(s.representative_order(0) == 6);
+    CHECK(s.shape_order(0) == 8);
+    CHECK(s.mode_shape.col(0) == d.poles.mode_shape.col(s.shape_pole(0)));
+    o.shape_representative = modaluq::Representative::median;
+    CHECK(modaluq::select_modes(d, o).shape_order(0) == 6);
+}
+
 TEST_CASE("selection: a cluster whose frequency is less certain than its peak's bandwidth is dropped") {
     // Two stable columns over 10 orders: a 2 %-damped mode with sigma_f = 0.1 % of f
     // (sigma_f / (f xi) = 0.05) and a 0.5 %-damped column with sigma_f = 1 % of f (ratio 2).

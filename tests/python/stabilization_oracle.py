@@ -418,10 +418,10 @@ def select_modes_reference(diagram: Diagram, settings: ClusteringSettings | None
                 sf_med[k], sxi_med[k] = diagram.frequency_std[rep[k]], diagram.damping_std[rep[k]]
             if diagram.frequency_damping_correlation.size == diagram.n_poles:
                 rho[k] = diagram.frequency_damping_correlation[rep[k]]
-        # the shape pole: the lowest sufficient member when it lies below the representative
-        # (shape_representative "lowest"), else the representative
-        lower = diagram.order[lowest_member] < diagram.order[rep[k]]
-        sp[k] = lowest_member if settings.shape_representative == "lowest" and lower else rep[k]
+        # the shape pole (shape_representative "lowest"): the lowest sufficient member, unless the
+        # representative is lower and holds every selected mode (order >= 2 m)
+        keep_rep = diagram.order[rep[k]] >= 2 * n_modes and diagram.order[lowest_member] >= diagram.order[rep[k]]
+        sp[k] = lowest_member if settings.shape_representative == "lowest" and not keep_rep else rep[k]
         ref = int(np.argmax(np.abs(shape[:, sp[k]])))
         aligned = shape[:, members] / shape[ref, members][None, :]
         sh_spread_r[:, k] = np.std(aligned.real, axis=1, ddof=ddof)

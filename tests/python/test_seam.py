@@ -148,7 +148,7 @@ def test_the_results_table_ends_with_the_shape_orders():
     text = str(a.result)
     sel = a.result.select_modes()
     line = [x for x in text.split("\n") if x.startswith(SHAPES_LINE)]
-    assert line == [f"{SHAPES_LINE} (the representative's if lower), with its own std (orders "
+    assert line == [f"{SHAPES_LINE} (the representative's where lower and of order >= 2 x modes), with its own std (orders "
                     + ", ".join(str(int(o)) for o in sel.shape_order) + ")"]
     assert SHAPES_LINE not in str(a.selected)  # the cases read the shapes at the representative
 

@@ -105,8 +105,9 @@ struct ClusteringOptions {
     /// lowest: the lowest reliable member at an order n >= max(k*, 2 m), whose shape sigma is
     /// calibrated where the median member's, often far above the true order, is too small because
     /// the noise directions there are frozen (docs/shapes.md §6); the representative itself when
-    /// that member's order is not below the representative's. median: the representative. With
-    /// representative lowest both are that pole.
+    /// that member is not below it and the representative's order holds every selected mode
+    /// (>= 2 m; a high k* on a measured record). median: the representative. With representative
+    /// lowest both are that pole.
     Representative shape_representative = Representative::lowest;
     /// The sigma of f and xi reported per mode (SelectedModes::frequency_std, damping_std,
     /// frequency_damping_correlation); the clusters, the representative and its value, and the
@@ -609,13 +610,15 @@ inline SelectedModes select_modes(const Diagram& diagram, const ClusteringOption
             for (Index i : candidates)  // ascending order: "<=" hands ties to the higher order
                 if (distance(i) <= distance(rep)) rep = i;
         }
-        // The shape is read lower, never higher, than the representative: where most of a cluster
-        // lies below k* (measured records whose noise floor is high), orders above the
-        // representative add noise states to the shape, not calibration.
-        const Index shape_rep =
-            options.shape_representative == Representative::lowest && P.order(lowest_member) < P.order(rep)
-                ? lowest_member
-                : rep;
+        // The shape of the lowest sufficient member, except where the representative already holds
+        // every selected mode (order >= 2 m) at a lower order: on measured records whose noise
+        // floor k* is far above the modes' order the member above k* adds noise states to the
+        // shape, not calibration. A representative below 2 m cuts signal and is never kept.
+        const bool rep_holds_the_modes = P.order(rep) >= 2 * nm;
+        const Index shape_rep = options.shape_representative == Representative::lowest &&
+                                        (P.order(lowest_member) < P.order(rep) || !rep_holds_the_modes)
+                                    ? lowest_member
+                                    : rep;
         // "lowest" reports one order's identification, sigma included; "median" the cluster's sigma
         s.frequency_std(k) = sf.empty() || lowest ? P.frequency_std(rep) : detail::median(sf);
         s.damping_std(k) = sxi.empty() || lowest ? P.damping_std(rep) : detail::median(sxi);
