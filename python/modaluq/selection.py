@@ -296,8 +296,9 @@ class SelectedModes:
                 "spread: across the cluster)\n"
         s += self.table()
         if self.settings.shape_representative == "lowest" and self.settings.representative != "lowest":
-            s += ("\nshapes: each cluster's pole at the lowest sufficient order (the representative's where lower and of order >= 2 x modes), "
-                  "with its own std (orders " + ", ".join(str(int(o)) for o in self.shape_order) + ")")
+            s += ("\nshapes: each cluster's pole at the lowest sufficient order (the representative's where lower "
+                  "and of order >= 2 x modes), with its own std (orders "
+                  + ", ".join(str(int(o)) for o in self.shape_order) + ")")
         if self.dropped_n_poles.size:
             # counted by the core's code of each
             too_small = self.dropped_code.count(DropReason.TOO_FEW_POLES)

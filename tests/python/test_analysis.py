@@ -241,3 +241,6 @@ def test_option_error_names_the_option_the_user_typed():
         "order 9: 3 outputs and 3 references"
     assert str(option_error(TypeError("max_damping_ratio must be > min_damping_ratio"), opts)) == \
         "max_damping_ratio must be > min_damping_ratio"
+    # a dotted key (a monitoring store's settings fingerprint) stays the key it is
+    assert str(option_error(ValueError("other settings (settings.block_rows differ)"), opts)) == \
+        "other settings (settings.block_rows differ)"

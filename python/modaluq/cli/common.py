@@ -94,13 +94,15 @@ def option_error(exc: Exception, options) -> Exception:
     """``exc`` with the library's parameter names that are ``options`` written as the options the
     user typed: ``block_rows 5`` → ``--block-rows 5``, ``outputs: ...`` → ``--outputs: ...``.
 
-    A name with an underscore is unambiguous anywhere in the message; a plain word
-    (``outputs``) only where the message starts with it, alone or as ``outputs and inputs``.
+    A name with an underscore is unambiguous anywhere in the message, except as the part of a
+    dotted key (``clustering.shape_representative``, a settings fingerprint's), which is left as
+    it is; a plain word (``outputs``) only where the message starts with it, alone or as
+    ``outputs and inputs``.
     """
     def option(m):
         return "--" + m.group().replace("_", "-") if m.group() in options else m.group()
 
-    text = re.sub(r"\b[a-z]+(?:_[a-z]+)+\b", option, str(exc))
+    text = re.sub(r"(?<![.\w])[a-z]+(?:_[a-z]+)+\b", option, str(exc))
     text = re.sub(r"^[a-z]+\b(?= and [a-z]+\b)|^[a-z]+\b", option, text)
     text = re.sub(r"^(--[a-z-]+ and )([a-z]+)\b", lambda m: m.group(1) + option(re.match(r".*", m.group(2))), text)
     return type(exc)(text)

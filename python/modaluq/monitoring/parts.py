@@ -98,7 +98,12 @@ class Parts:
                 previous = json.loads(stamp.read_text())
             except ValueError:
                 previous = None
-            if previous != fingerprint:
+            # a folder without any part (a run that stopped before its first record) holds
+            # nothing to mix: it takes the new settings
+            no_parts = not any(p.name != stamp.name for p in folder.glob("*.json"))
+            if previous != fingerprint and no_parts:
+                _atomic_write(stamp, dumps(fingerprint, indent=1).encode())
+            elif previous != fingerprint:
                 changed = _changed_keys(previous, fingerprint)
                 raise ValueError(f"the part files in {folder} were made with other settings ({', '.join(changed)} "
                                  "differ); run again with resume=False (--no-resume) to start again with these "

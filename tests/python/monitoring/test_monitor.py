@@ -71,6 +71,20 @@ def test_resume_runs_nothing_done_and_refuses_other_settings(campaign, tmp_path)
                    tracking=TrackingSettings(reference_records=4)).n_run == 8
 
 
+def test_a_store_without_parts_takes_other_settings(campaign, tmp_path):
+    """A run that stopped before its first record (settings.json written, no part) does not lock
+    the store to its settings: there is nothing to mix."""
+    from modaluq.monitoring.parts import Parts
+    from modaluq.monitoring.worker import TaskConfig
+
+    folder = tmp_path / "t.parts"
+    Parts(folder, TaskConfig(settings=SETTINGS.replace(orders=(2, 4, 6, 8))))  # the stamp only
+    out = monitor(campaign.records[:6], settings=SETTINGS, out=tmp_path / "t.nc", progress=False,
+                  tracking=TrackingSettings(reference_records=4))
+    assert out.n_run == 6
+    assert json.loads((folder / "settings.json").read_text())["settings"]["orders"] == list(SETTINGS.orders)
+
+
 def test_a_restart_removes_the_half_written_parts_of_a_killed_writer(campaign, tmp_path):
     out = tmp_path / "t.nc"
     monitor(campaign.records[:6], settings=SETTINGS, out=out, progress=False,
