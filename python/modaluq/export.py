@@ -142,7 +142,8 @@ def diagram_to_xarray(diagram, selected=None, attrs: dict | None = None, geometr
         if sel.mode_covariance is not None:
             pole_vars["selected_covariance"] = (
                 ("mode", "parameter", "parameter_"), sel.mode_covariance,
-                {"long_name": "covariance of [f (Hz), xi, Re shape, Im shape] of the representative pole"})
+                {"long_name": "covariance of [f (Hz), xi, Re shape, Im shape] of each mode "
+                                  "(SelectedModes.mode_covariance: the shape pole's)"})
             params = ["frequency_hz", "damping_ratio"] + [f"re_{c}" for c in diagram.output_names] + \
                      [f"im_{c}" for c in diagram.output_names]
             coords["parameter"] = params

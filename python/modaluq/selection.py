@@ -241,7 +241,8 @@ class SelectedModes:
             "frequency_spread": self.frequency_spread,
             "damping_ratio": self.damping_ratio, "damping_std": self.damping_std,
             "damping_spread": self.damping_spread,
-            "representative_order": self.representative_order, "n_poles": self.n_poles,
+            "representative_order": self.representative_order, "shape_order": self.shape_order,
+            "n_poles": self.n_poles,
             "order_min": self.order_min, "order_max": self.order_max, "min_mac": self.min_mac,
             "noise_coupled": self.noise_coupled,
             "mpc": self.mpc, "mpc_std": self.mpc_std, "mpd_deg": self.mpd_deg, "mpd_std_deg": self.mpd_std_deg,
@@ -464,8 +465,12 @@ def _shape_indicators(diagram, modes: SelectedModes) -> dict:
         found = [pole_covariance(int(p)) for p in modes.shape_pole]
         if all(c is not None for c in found):
             covs = np.stack(found)
-            if modes.settings.cluster_std == "mean" or np.any(modes.shape_pole != modes.representative_pole):
-                covs = _with_cluster_std(covs, modes)
+            # per mode: a mode whose shape pole is its representative keeps that pole's covariance
+            # (unless its σ are the cluster mean's)
+            which = np.asarray(modes.shape_pole) != np.asarray(modes.representative_pole)
+            if modes.settings.cluster_std == "mean":
+                which[:] = True
+            covs = _with_cluster_std(covs, modes, which)
     factors = None
     pole_shape_factor = getattr(diagram, "pole_shape_factor", None)
     if covs is not None and pole_shape_factor is not None:
@@ -482,13 +487,13 @@ def _shape_indicators(diagram, modes: SelectedModes) -> dict:
                 mpd_deg=np.array([m.value for m in mpd]), mpd_std_deg=np.array([m.std for m in mpd]))
 
 
-def _with_cluster_std(covs: np.ndarray, modes: SelectedModes) -> np.ndarray:
-    """The representatives' covariances ``covs`` with their f and ξ entries the modes': the [f, ξ]
-    block from ``frequency_std``, ``damping_std`` and ``frequency_damping_correlation``, and the
-    f and ξ rows against the shape scaled from the representative's σ to the mode's (the
-    representative's correlations with its shape kept)."""
+def _with_cluster_std(covs: np.ndarray, modes: SelectedModes, which: np.ndarray) -> np.ndarray:
+    """The shape poles' covariances ``covs`` with, for the modes ``which``, their f and ξ entries
+    the modes': the [f, ξ] block from ``frequency_std``, ``damping_std`` and
+    ``frequency_damping_correlation``, and the f and ξ rows against the shape scaled from the
+    pole's σ to the mode's (the pole's correlations with its shape kept)."""
     out = covs.copy()
-    for k in range(modes.n_modes):
+    for k in np.flatnonzero(which):
         sf, sx, rho = modes.frequency_std[k], modes.damping_std[k], modes.frequency_damping_correlation[k]
         own = np.sqrt(np.clip(np.diag(covs[k])[:2], 0.0, None))
         scale = np.divide([sf, sx], own, out=np.zeros(2), where=own > 0)

@@ -6,6 +6,7 @@ against the second-order moments computed here from numerical derivatives; the "
 false-rejection rate against Gaussian draws of known covariance; the selected modes carry them.
 """
 
+import dataclasses
 import pickle
 
 import numpy as np
@@ -13,6 +14,7 @@ import pytest
 
 import modaluq
 from modaluq.indicators import mac_test, mean_phase_deviation, modal_phase_collinearity, shape_covariance
+from modaluq.selection import _shape_indicators
 
 
 def mpc_numpy(phi):
@@ -136,16 +138,24 @@ def test_selected_modes_carry_covariance_and_indicators():
         i = int(np.flatnonzero(m.frequency_hz == diagram.frequency_hz[pole])[0])
         np.testing.assert_array_equal(sel.mode_covariance[k][2:, 2:], m.covariance[i][2:, 2:])
         np.testing.assert_array_equal(diagram.pole_covariance(pole), m.covariance[i])
-        if pole == sel.representative_pole[k]:
-            np.testing.assert_array_equal(sel.mode_covariance[k], m.covariance[i])
-        else:
-            assert sel.mode_covariance[k][0, 0] == sel.frequency_std[k] ** 2
-            assert sel.mode_covariance[k][1, 1] == sel.damping_std[k] ** 2
+        assert pole != sel.representative_pole[k]  # this record: every shape read below its representative
+        assert sel.mode_covariance[k][0, 0] == sel.frequency_std[k] ** 2
+        assert sel.mode_covariance[k][1, 1] == sel.damping_std[k] ** 2
         # the shape std on the diagonal
         np.testing.assert_allclose(np.sqrt(np.diag(sel.mode_covariance[k])[2:2 + l]), sel.mode_shape_std_real[:, k],
                                    rtol=1e-12)
         r = modal_phase_collinearity(sel.mode_shape[:, k], shape_covariance(m.covariance[i]))
         assert (sel.mpc[k], sel.mpc_std[k]) == (r.value, r.std)
+    # shapes at the representatives: each mode's covariance is its representative's own, whatever
+    # the other modes' shape poles (a mode's covariance does not depend on the others')
+    at_rep = diagram.select_modes(shape_representative="median")
+    for k, pole in enumerate(at_rep.representative_pole):
+        np.testing.assert_array_equal(at_rep.mode_covariance[k], diagram.pole_covariance(int(pole)))
+    mixed = dataclasses.replace(sel, shape_pole=np.where(np.arange(sel.n_modes) == 0, sel.representative_pole,
+                                                         sel.shape_pole))
+    covs = _shape_indicators(diagram, mixed)["mode_covariance"]
+    np.testing.assert_array_equal(covs[0], diagram.pole_covariance(int(sel.representative_pole[0])))
+    np.testing.assert_array_equal(covs[1:], sel.mode_covariance[1:])
     assert np.all(sel.mpc > 0.99) and np.all(np.isfinite(sel.mpc_std)) and np.all(sel.mpd_deg < 5)
     frame = sel.to_dataframe()
     np.testing.assert_array_equal(frame["mpc"].to_numpy(), sel.mpc)

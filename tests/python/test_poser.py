@@ -69,6 +69,12 @@ def test_poser_global_modes_with_their_sigma(campaign, poser):
     assert np.all(poser.mode_index >= 0)
     assert "6 modes" in str(sel)
     assert list(sel.to_dataframe().index) == [1, 2, 3, 4, 5, 6]
+    # each global shape is the basis setup's (the first that has the mode), read at its shape order
+    for t in range(sel.n_modes):
+        b = int(np.flatnonzero(poser.mode_index[:, t] >= 0)[0])
+        assert sel.shape_order[t] == poser.setup_modes[b].shape_order[poser.mode_index[b, t]]
+    assert sel.settings == poser.setup_modes[0].settings
+    assert "(orders " + ", ".join(str(int(o)) for o in sel.shape_order) + ")" in str(sel)
     assert not poser.reference_check.rejected.any()
 
 

@@ -487,6 +487,7 @@ def test_chain_shape_pole_gives_the_shape_and_the_representative_f_and_xi(chain_
     np.testing.assert_array_equal(hyb.mpc_std, low.mpc_std)
     np.testing.assert_array_equal(med.shape_pole, med.representative_pole)  # "median": one pole
     assert "shapes: each cluster's pole at the lowest sufficient order" in str(hyb)
+    np.testing.assert_array_equal(hyb.to_dataframe()["shape_order"].to_numpy(), hyb.shape_order)
     assert "shapes:" not in str(med) and "shapes:" not in str(low)
     assert np.any(hyb.shape_pole != hyb.representative_pole)
     for k, p in enumerate(hyb.shape_pole):

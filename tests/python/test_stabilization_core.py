@@ -43,7 +43,7 @@ CLUSTERING = [{}, {"linkage": "single"}, {"linkage": "complete", "distance_thres
               {"per_cluster_min_size": True, "max_frequency_std_per_bandwidth": 0.3},
               {"max_frequency_std_per_bandwidth": None}, {"cluster_std": "mean"}, {"cluster_std": "median"},
               {"representative": "lowest"}, {"representative": "lowest", "cluster_std": "mean"},
-              {"shape_representative": "lowest"}, {"shape_representative": "lowest", "cluster_std": "mean"}]
+              {"shape_representative": "median"}, {"shape_representative": "median", "cluster_std": "mean"}]
 
 
 @pytest.fixture(scope="module")
@@ -108,6 +108,21 @@ def test_core_selection_equals_the_scipy_reference(results, record, clustering):
     assert_same_selection(core, ref)
     if not clustering:
         assert core.n_modes >= 2  # the comparison covers real clusters, not an empty selection
+
+
+def test_a_high_noise_floor_keeps_a_lower_representatives_shape_as_the_reference_does(results):
+    """k* = 30 on the chain (6 modes, 2 m = 12): a representative at an order in [12, 30) keeps
+    its shape; one above 30 gives way to the lowest member at or above 30."""
+    import dataclasses
+
+    result = dataclasses.replace(results["chain input/output"], significant_singular_values=30)
+    diagram = modaluq.stabilization_diagram(result)
+    core, ref = modaluq.select_modes(diagram), select_modes_reference(diagram)
+    assert_same_selection(core, ref)
+    kept = core.shape_pole == core.representative_pole
+    assert kept.any() and (~kept).any()
+    assert np.all((core.representative_order[kept] >= 2 * core.n_modes) & (core.representative_order[kept] < 30))
+    assert np.all((core.shape_order[~kept] >= 30) & (core.shape_order[~kept] < core.representative_order[~kept]))
 
 
 def test_nearest_neighbour_chain_equals_scipy_on_random_points():

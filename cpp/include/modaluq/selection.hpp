@@ -41,8 +41,8 @@ inline const char* to_string(ClusterStd c) {
     return "?";
 }
 
-/// Which member of a cluster select_modes reports (ClusteringOptions::representative): its
-/// frequency, damping ratio and shape (and, in Python, its covariance).
+/// Which member of a cluster select_modes reports (ClusteringOptions::representative for its
+/// frequency and damping ratio, ClusteringOptions::shape_representative for its shape).
 enum class Representative : int {
     /// the candidate nearest to the cluster's median (f, xi), each in its median sigma
     median = 0,
@@ -186,8 +186,8 @@ struct SelectedModes {
     IndexVector representative_order;       ///< model order of the representative
     IndexVector representative_pole;        ///< its index in the diagram
     /// the member whose shape (and its sigma, spread reference and min_mac) the mode reports
-    /// (ClusteringOptions::shape_representative): the representative, or its cluster's lowest
-    /// sufficient member
+    /// (ClusteringOptions::shape_representative): by default the cluster's lowest sufficient
+    /// member, the representative where it is lower and of order >= 2 m
     IndexVector shape_pole;
     IndexVector shape_order;                ///< its model order
     IndexVector n_poles;                    ///< members of each cluster

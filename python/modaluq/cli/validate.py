@@ -227,7 +227,7 @@ def register(subparsers) -> None:
     g.add_argument("--representative", choices=("median", "lowest"), default=None,
                    help="which pole of each mode's cluster is compared, as for modaluq identify (default median)")
     g.add_argument("--shape-representative", choices=("median", "lowest"), default=None,
-                   help="which pole gives each mode's shape, as for modaluq identify (default median)")
+                   help="which pole gives each mode's shape, as for modaluq identify (default lowest)")
     v.add_argument("--out", metavar="DIR", default=None,
                    help="directory for report.md, results.csv, summary.csv, results.npz and the histogram PNGs "
                         "(--split-halves: report.md and pairs.csv)")

@@ -107,7 +107,6 @@ def test_the_http_servers_dask_opens_are_closed_and_no_comm_port_speaks_http(sta
         assert _tls_certificate_name(port) == "CN=dask-internal", address
 
 
-@pytest.mark.slow
 def _listening_ports(driver) -> set:
     """The TCP ports the driver and its descendants listen on. A short-lived child (a spawn
     helper) can exit between the listing and the look at its sockets: it is skipped, and the
@@ -132,6 +131,7 @@ def _listening_ports(driver) -> set:
     return previous
 
 
+@pytest.mark.slow
 def test_while_modaluq_monitor_workers_2_runs_only_its_tls_comm_ports_listen(tmp_path):
     """What `ss -ltnp` shows during `modaluq monitor --workers 2`: the listeners of the driver (scheduler,
     nannies) and of its worker processes are 5 TLS ports on 127.0.0.1, none answering HTTP."""
