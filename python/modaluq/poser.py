@@ -25,7 +25,6 @@ from ._blas import single_threaded as single_threaded_blas
 from .indicators import mean_phase_deviation, modal_phase_collinearity, shape_covariance
 from .results import ModalUQWarning, result_from_core
 from .selection import SelectedModes, select_modes
-from .settings import ClusteringSettings
 from .stabilization import stabilization_diagram
 
 #: Family-wise level of the reference test (the core's PoserOptions.reference_test_level, set
@@ -220,7 +219,7 @@ def _global_selected(merged, setup_modes, dof_names) -> SelectedModes:
         representative_pole=np.full(nm, -1, np.int64), n_poles=per_mode("n_poles", np.int64),
         # the basis setup's shape (its order) and the selection that read it; no pole of a merged diagram
         shape_order=per_mode("shape_order", np.int64), shape_pole=np.full(nm, -1, np.int64),
-        settings=bsel[0].settings if bsel else ClusteringSettings(),
+        settings=setup_modes[0].settings,
         order_min=per_mode("order_min", np.int64), order_max=per_mode("order_max", np.int64),
         members=tuple(np.zeros(0, np.int64) for _ in range(nm)), mode_of_pole=np.zeros(0, np.int64),
         dropped_frequency_hz=np.zeros(0), dropped_n_poles=np.zeros(0, np.int64), min_cluster_size=0,

@@ -210,7 +210,7 @@ class SelectedModes:
         if flags.shape != np.shape(self.frequency_hz):
             flags = np.zeros(np.shape(self.frequency_hz), bool)
         object.__setattr__(self, "noise_coupled", flags)
-        # unknown (made by hand or by PoSER): the shape is the representative's
+        # unknown (made by hand): the shape is the representative's
         if self.shape_pole is None:
             object.__setattr__(self, "shape_pole", np.asarray(self.representative_pole, np.int64))
         if self.shape_order is None:
@@ -465,11 +465,10 @@ def _shape_indicators(diagram, modes: SelectedModes) -> dict:
         found = [pole_covariance(int(p)) for p in modes.shape_pole]
         if all(c is not None for c in found):
             covs = np.stack(found)
-            # per mode: a mode whose shape pole is its representative keeps that pole's covariance
-            # (unless its σ are the cluster mean's)
-            which = np.asarray(modes.shape_pole) != np.asarray(modes.representative_pole)
-            if modes.settings.cluster_std == "mean":
-                which[:] = True
+            # per mode: one whose shape pole is its representative keeps that pole's covariance,
+            # unless its σ are the cluster mean's
+            which = (np.asarray(modes.shape_pole) != np.asarray(modes.representative_pole)) | (
+                modes.settings.cluster_std == "mean")
             covs = _with_cluster_std(covs, modes, which)
     factors = None
     pole_shape_factor = getattr(diagram, "pole_shape_factor", None)

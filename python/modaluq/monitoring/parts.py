@@ -93,22 +93,20 @@ class Parts:
         if start_again:  # resume=False: the parts of earlier runs (perhaps other settings) are dropped
             for old in folder.glob("*.json"):
                 old.unlink()
+        previous = None
         if stamp.exists():
             try:
                 previous = json.loads(stamp.read_text())
             except ValueError:
-                previous = None
-            # a folder without any part (a run that stopped before its first record) holds
-            # nothing to mix: it takes the new settings
-            no_parts = not any(p.name != stamp.name for p in folder.glob("*.json"))
-            if previous != fingerprint and no_parts:
-                _atomic_write(stamp, dumps(fingerprint, indent=1).encode())
-            elif previous != fingerprint:
+                pass
+        if previous != fingerprint:
+            # other settings: refused where parts were made with them; a folder without any part
+            # (no stamp, or a run that stopped before its first part) takes these
+            if stamp.exists() and any(p.name != stamp.name for p in folder.glob("*.json")):
                 changed = _changed_keys(previous, fingerprint)
                 raise ValueError(f"the part files in {folder} were made with other settings ({', '.join(changed)} "
                                  "differ); run again with resume=False (--no-resume) to start again with these "
                                  "settings, or write to another store")
-        else:
             _atomic_write(stamp, dumps(fingerprint, indent=1).encode())
 
     def path(self, key: str) -> Path:
