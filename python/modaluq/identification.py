@@ -30,7 +30,7 @@ from .io.campaign import Campaign, load_campaign
 from .poser import check_references_after_modular, identify_poser, reference_check_orders
 from .preprocess import preprocess
 from .results import IdentificationWarning, Result, result_from_core, warn_all
-from .settings import Settings
+from .settings import ClusteringSettings, Settings, StabilityCriteria
 
 __all__ = ["identify", "identify_quietly", "identify_setups", "make_settings", "short_lag_warning",
            "slow_decay_advice"]
@@ -273,7 +273,7 @@ def _output_names(output_names, y) -> tuple:
 
 def identify_setups(setups, *, fs=None, references: Sequence[str] | None = None,
                     inputs: Sequence[str] | None = None, settings: Settings | None = None,
-                    method: str = "modular", **keywords):
+                    method: str = "modular", criteria=None, clustering=None, **keywords):
     """Identify a campaign measured in several setups, merged into global mode shapes with their σ.
 
     The modular merge of Döhler & Mevel (2012) with the first-order covariance of Döhler, Lam &
@@ -314,6 +314,12 @@ def identify_setups(setups, *, fs=None, references: Sequence[str] | None = None,
         tested against the others' (a mislabelled or moved reference issues a
         :class:`~modaluq.poser.ReferenceMismatchWarning` naming the setup, the channel and the
         mode); for the modular merge this identifies each setup alone once more.
+    criteria, clustering : StabilityCriteria, ClusteringSettings, optional
+        ``method="poser"`` only: how each setup's modes are selected before the merge, as
+        ``Result.select_modes(criteria, clustering)`` would (defaults when None); for example
+        ``ClusteringSettings(shape_representative="median")`` for the shapes of the clusters'
+        representatives. The modular merge returns a :class:`Result`: give them to its
+        ``select_modes`` instead (a ValueError here).
     settings, **keywords
         As for :func:`identify`: ``block_rows``, ``past_block_rows``, ``orders``, ``n_blocks``
         (per setup), ``uncertainty``, ``input_rcond``, ``threads`` and the preprocessing
@@ -339,6 +345,14 @@ def identify_setups(setups, *, fs=None, references: Sequence[str] | None = None,
     """
     if method not in ("modular", "poser"):
         raise ValueError(f"method must be 'modular' or 'poser'; got {method!r}")
+    if method == "modular" and (criteria is not None or clustering is not None):
+        given = " and ".join(n for n, v in (("criteria", criteria), ("clustering", clustering)) if v is not None)
+        raise ValueError(f"{given}: only with method='poser' (each setup's modes are selected before the merge); "
+                         "the modular merge returns a Result: give them to its select_modes(criteria, settings)")
+    if criteria is not None and not isinstance(criteria, StabilityCriteria):
+        raise TypeError(f"criteria must be a StabilityCriteria; got {type(criteria).__name__}")
+    if clustering is not None and not isinstance(clustering, ClusteringSettings):
+        raise TypeError(f"clustering must be a ClusteringSettings; got {type(clustering).__name__}")
     if isinstance(setups, (str, os.PathLike)) and str(setups).lower().endswith(".toml"):
         setups = load_campaign(setups)
     base = campaign_settings(setups, settings) if isinstance(setups, Campaign) else settings
@@ -382,7 +396,8 @@ def identify_setups(setups, *, fs=None, references: Sequence[str] | None = None,
         record.update(references=list(range(r)), reference_names=refs,
                       frequency_range=None if band is None else list(band))
         with naming_settings_on_memory_error(s):
-            return identify_poser(core_setups, o, record, names_per_setup, n_inputs_per_setup, dof_names, refs)
+            return identify_poser(core_setups, o, record, names_per_setup, n_inputs_per_setup, dof_names, refs,
+                                  criteria=criteria, clustering=clustering)
     with single_threaded_blas(), naming_settings_on_memory_error(s):
         ident = _core.identify_setups(core_setups, o)
     record = s.record(rate, l_g)

@@ -141,6 +141,35 @@ def test_method_is_checked(campaign):
         modaluq.identify_setups(_frames(campaign), fs=campaign.fs, references=["L3", "R8"], method="PoSER", **KW)
 
 
+def test_poser_selects_each_setup_with_the_clustering_and_criteria_given(campaign, poser):
+    # The shapes of the representatives (the choice before the lowest sufficient order), and a
+    # looser frequency criterion: each setup is selected with them, and the merge carries them.
+    clustering = modaluq.ClusteringSettings(shape_representative="median")
+    criteria = modaluq.StabilityCriteria(max_frequency_change=0.02)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", modaluq.ReferenceMismatchWarning)
+        out = modaluq.identify_setups(_frames(campaign), fs=campaign.fs, references=["L3", "R8"], method="poser",
+                                      criteria=criteria, clustering=clustering, **KW)
+    for res, sel in zip(out.setups, out.setup_modes):
+        expected = res.select_modes(criteria, clustering)
+        np.testing.assert_array_equal(sel.frequency_hz, expected.frequency_hz)
+        np.testing.assert_array_equal(sel.shape_pole, expected.representative_pole)
+    assert out.select_modes().settings == out.setup_modes[0].settings
+    assert out.select_modes().settings != poser.select_modes().settings
+
+
+def test_selection_settings_are_refused_by_name_where_they_do_not_apply(campaign):
+    args = dict(fs=campaign.fs, references=["L3", "R8"], **KW)
+    with pytest.raises(ValueError, match="clustering: only with method='poser'"):
+        modaluq.identify_setups(_frames(campaign), clustering=modaluq.ClusteringSettings(), **args)
+    with pytest.raises(ValueError, match="criteria: only with method='poser'"):
+        modaluq.identify_setups(_frames(campaign), criteria=modaluq.StabilityCriteria(), **args)
+    with pytest.raises(TypeError, match="clustering must be a ClusteringSettings"):
+        modaluq.identify_setups(_frames(campaign), method="poser", clustering={"linkage": "single"}, **args)
+    with pytest.raises(TypeError, match="criteria must be a StabilityCriteria"):
+        modaluq.identify_setups(_frames(campaign), method="poser", criteria=0.01, **args)
+
+
 @pytest.mark.parametrize("io", [False, True])
 def test_core_merge_equals_the_numpy_reference(io):
     # The NumPy reference's PoSER (factor form (12.10), oracle_multisetup.identify_poser) against
