@@ -106,6 +106,7 @@ void modaluq::python::bind_stabilization(py::module_& m) {
         .def_readwrite("cluster_std", &ClusteringOptions::cluster_std)
         .def_readwrite("representative", &ClusteringOptions::representative)
         .def_readwrite("shape_representative", &ClusteringOptions::shape_representative)
+        .def_readwrite("order_discrepancy", &ClusteringOptions::order_discrepancy)
         .def("validate", &ClusteringOptions::validate);
 
     py::class_<SelectedModes>(m, "SelectedModes")
@@ -143,6 +144,7 @@ void modaluq::python::bind_stabilization(py::module_& m) {
         .def_readonly("frequency_std_per_bandwidth", &SelectedModes::frequency_std_per_bandwidth)
         .def_readonly("frequency_damping_correlation", &SelectedModes::frequency_damping_correlation)
         .def_readonly("block_too_short", &SelectedModes::block_too_short)
+        .def_readonly("order_discrepancy", &SelectedModes::order_discrepancy)
         .def_readonly("min_cluster_size", &SelectedModes::min_cluster_size)
         .def_readonly("max_frequency_std_per_bandwidth", &SelectedModes::max_frequency_std_per_bandwidth);
     m.def("select_modes", &select_modes, py::arg("diagram"), py::arg("options"),

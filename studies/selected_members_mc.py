@@ -1,12 +1,17 @@
 """Monte Carlo of the engineer's call with each selected mode's cluster kept: the members' orders,
-f, ξ and σ, the noise floor k*, and the selected value and σ of three selections of the same
-identification (the default, ``cluster_std="mean"``, ``representative="lowest"``), so that
-candidate σ for the selected modes can be compared after the run on the same records (issue 27:
-the output-only engineer's call is 10–40 % low).
+f, ξ, σ and noise-coupling flags, the noise floor k*, and the selected value and σ of four
+selections of the same identification (the default; ``order_discrepancy=False``, the σ before
+2026-11-27 but for the noise-coupled clusters' rule; ``cluster_std="mean"``;
+``representative="lowest"``), so that candidate σ for the selected modes can be compared after the
+run on the same records (issue 27, docs/validation.md (h)).
+
+Each table cell is median σ / σ_MC · coverage of ±1.96 σ around the Monte Carlo mean · RMS z, for
+f and for ξ of each true mode; the last column counts the cells inside both bands (median
+0.85–1.18, coverage 0.93–0.97) and gives the worst coverage.
 
 Usage:
-  python studies/selected_members_mc.py RECORDS [chain|frame] OUT.pkl    # run (about 1.5 s a record)
-  python studies/selected_members_mc.py --report OUT.pkl [OUT2.pkl ...]  # the candidates' tables
+  python studies/selected_members_mc.py RECORDS [chain|frame] OUT.pkl    # run (about 1 s a record)
+  python studies/selected_members_mc.py --report OUT.pkl [OUT2.pkl ...]  # the tables again
 """
 import pickle
 import sys
@@ -21,8 +26,8 @@ FS = 50.0
 DURATION = 400.0
 #: structure: (modaluq.simulate keywords, seed offset)
 STRUCTURES = {"chain": ({}, 7000), "frame": (dict(n_dof=4, input_dofs=(0, 3)), 8000)}
-VARIANTS = {"default": None, "mean": ClusteringSettings(cluster_std="mean"),
-            "lowest": ClusteringSettings(representative="lowest")}
+VARIANTS = {"default": None, "no order check": ClusteringSettings(order_discrepancy=False),
+            "mean": ClusteringSettings(cluster_std="mean"), "lowest": ClusteringSettings(representative="lowest")}
 
 
 def _mode_rows(res, truth):
@@ -39,6 +44,7 @@ def _mode_rows(res, truth):
             j = j[np.argmin(np.abs(sel.frequency_hz[j] - f0))]
             row[v] = (sel.frequency_hz[j], sel.frequency_std[j], sel.damping_ratio[j], sel.damping_std[j])
             if v == "default":
+                row["widened"] = bool(sel.order_discrepancy[j])
                 m = np.asarray(sel.members[j])
                 row["members"] = dict(order=d.order[m], f=d.frequency_hz[m], xi=d.damping_ratio[m],
                                       sf=d.frequency_std[m], sxi=d.damping_std[m],
@@ -49,14 +55,16 @@ def _mode_rows(res, truth):
     return rows
 
 
-def run(n_records, structure, out):
+def run(n_records, structure, out=None, duration=DURATION):
+    """Identify ``n_records`` records of ``structure`` (output-only, then input/output); write the
+    data to ``out`` (a pickle) when given; return it."""
     keywords, offset = STRUCTURES[structure]
     data = {"structure": structure, "records": {}}
     for with_input in (False, True):
         name = "IO" if with_input else "OO"
         recs = []
         for k in range(n_records):
-            sim = modaluq.simulate(int(DURATION * FS), seed=offset + k, **keywords)
+            sim = modaluq.simulate(int(duration * FS), seed=offset + k, **keywords)
             truth = np.sort(sim.frequency_hz)
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
@@ -66,28 +74,18 @@ def run(n_records, structure, out):
                 print(f"{structure} {name}: {k + 1}/{n_records}", flush=True)
         data["records"][name] = recs
         data["truth"] = truth
-    with open(out, "wb") as fh:
-        pickle.dump(data, fh)
+    if out is not None:
+        with open(out, "wb") as fh:
+            pickle.dump(data, fh)
+    return data
 
 
-def candidates(row):
-    """Candidate σ (f, ξ) for the default's selected value, from its cluster."""
+def spread_candidate(row):
+    """A candidate measured and not taken (docs/validation.md (h)): the default's σ with the
+    cluster's spread across orders added, √(σ² + spread²), for f and ξ."""
     mem = row["members"]
-    ok = ~mem["coupled"] & np.isfinite(mem["sf"])
-    if not ok.any():  # every member noise-coupled: the selection's own fallback
-        ok = np.isfinite(mem["sf"])
-    f, xi, sf, sxi = (mem[k][ok] for k in ("f", "xi", "sf", "sxi"))
-    med_f, med_x = np.median(sf), np.median(sxi)
-    spread_f, spread_x = np.std(f, ddof=1), np.std(xi, ddof=1)
-    mad_f = 1.4826 * np.median(np.abs(f - np.median(f)))
-    mad_x = 1.4826 * np.median(np.abs(xi - np.median(xi)))
-    return {
-        "median σ (now)": (med_f, med_x),
-        "√(σ² + spread²)": (np.hypot(med_f, spread_f), np.hypot(med_x, spread_x)),
-        "√(σ² + MAD²)": (np.hypot(med_f, mad_f), np.hypot(med_x, mad_x)),
-        "max(σ, spread)": (max(med_f, spread_f), max(med_x, spread_x)),
-        "RMS member σ": (np.sqrt(np.mean(sf ** 2)), np.sqrt(np.mean(sxi ** 2))),
-    }
+    sf, sxi = row["default"][1], row["default"][3]
+    return np.hypot(sf, np.std(mem["f"], ddof=1)), np.hypot(sxi, np.std(mem["xi"], ddof=1))
 
 
 def _cells(values, sigmas):
@@ -99,36 +97,43 @@ def _cells(values, sigmas):
     return np.median(s) / std, np.mean(np.abs(z) <= 1.96), np.sqrt(np.mean(z ** 2))
 
 
+def tables(data) -> dict:
+    """{configuration: {variant: [(cells of f, cells of ξ) per true mode]}} from a run's data."""
+    out = {}
+    for name, recs in data["records"].items():
+        table = {}
+        for m in range(len(data["truth"])):
+            for v in list(VARIANTS) + ["√(σ² + spread²)"]:
+                rows = [r[m] for r in recs if ("default" if v.startswith("√") else v) in r[m]]
+                if len(rows) < 3:
+                    continue
+                if v.startswith("√"):
+                    a = np.array([(r["default"][0], *spread_candidate(r)[:1], r["default"][2],
+                                   spread_candidate(r)[1]) for r in rows])
+                else:
+                    a = np.array([r[v] for r in rows])
+                table.setdefault(v, []).append((_cells(a[:, 0], a[:, 1]), _cells(a[:, 2], a[:, 3])))
+        out[name] = table
+    return out
+
+
 def report(paths):
     for path in paths:
         with open(path, "rb") as fh:
             data = pickle.load(fh)
-        truth = data["truth"]
-        for name, recs in data["records"].items():
-            print(f"\n{data['structure']} {name}, {len(recs)} records: median σ/σ_MC · coverage · RMS z, f | ξ")
-            labels = None
-            table = {}
-            for m in range(len(truth)):
-                rows = [r[m] for r in recs if "default" in r[m]]
-                vf = np.array([r["default"][0] for r in rows])
-                vx = np.array([r["default"][2] for r in rows])
-                cand = [candidates(r) for r in rows]
-                labels = list(cand[0])
-                for lab in labels:
-                    sfs = np.array([c[lab][0] for c in cand])
-                    sxs = np.array([c[lab][1] for c in cand])
-                    table.setdefault(lab, []).append((_cells(vf, sfs), _cells(vx, sxs)))
-                for v in ("mean", "lowest"):
-                    rv = [r[v] for r in recs if v in r[m] for r in [r[m]]]
-                    a = np.array(rv)
-                    table.setdefault(f"selection {v!r}", []).append((_cells(a[:, 0], a[:, 1]),
-                                                                   _cells(a[:, 2], a[:, 3])))
+        for name, table in tables(data).items():
+            n = len(data["records"][name])
+            print(f"\n{data['structure']} {name}, {n} records: median σ/σ_MC · coverage · RMS z per mode, f | ξ")
             for lab, cells in table.items():
-                fs = ", ".join(f"{c[0][0]:.2f}·{c[0][1]:.2f}" for c in cells)
-                xs = ", ".join(f"{c[1][0]:.2f}·{c[1][1]:.2f}" for c in cells)
+                fs = ", ".join("{:.2f}·{:.2f}·{:.2f}".format(*c[0]) for c in cells)
+                xs = ", ".join("{:.2f}·{:.2f}·{:.2f}".format(*c[1]) for c in cells)
                 inband = sum((0.85 <= c[i][0] <= 1.18) and (0.93 <= c[i][1] <= 0.97) for c in cells for i in (0, 1))
                 cov = min(c[i][1] for c in cells for i in (0, 1))
                 print(f"| {lab} | {fs} | {xs} | {inband}/{2 * len(cells)}, cov ≥ {cov:.2f} |")
+        for name, recs in data["records"].items():
+            fired = np.mean([r[m]["widened"] for r in recs for m in range(len(r)) if "widened" in r[m]])
+            print(f"{data['structure']} {name}: σ widened by the order (order_discrepancy) for {100 * fired:.1f} % "
+                  "of the selected true modes")
 
 
 if __name__ == "__main__":

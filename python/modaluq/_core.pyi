@@ -974,6 +974,7 @@ class ClusteringOptions:
     drop_doublets: bool
     linkage: Linkage
     merge_fragments: bool
+    order_discrepancy: bool
     per_cluster_min_size: bool
     representative: Representative
     shape_representative: Representative
@@ -1131,6 +1132,9 @@ class SelectedModes:
         ...
     @property
     def n_poles(self) -> typing.Annotated[numpy.typing.NDArray[numpy.int64], "[m, 1]"]:
+        ...
+    @property
+    def order_discrepancy(self) -> typing.Annotated[numpy.typing.NDArray[numpy.bool], "[m, 1]"]:
         ...
     @property
     def order_max(self) -> typing.Annotated[numpy.typing.NDArray[numpy.int64], "[m, 1]"]:

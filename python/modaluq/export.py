@@ -70,6 +70,8 @@ def selected_modes_to_dict(selected) -> dict:
             "order_max": int(selected.order_max[i]), "min_mac": num(selected.min_mac[i]),
             # every pole noise-coupled: may be noise, not a mode (SelectedModes.noise_coupled)
             "noise_coupled": bool(noise_coupled[i]),
+            # σ widened by the model order's effect (SelectedModes.order_discrepancy)
+            "order_discrepancy": bool(selected.order_discrepancy[i]),
             "mpc": num(selected.mpc[i]), "mpc_std": num(selected.mpc_std[i]),
             "mpd_deg": num(selected.mpd_deg[i]), "mpd_std_deg": num(selected.mpd_std_deg[i]),
             "mode_shape": shape,
@@ -151,6 +153,10 @@ def diagram_to_xarray(diagram, selected=None, attrs: dict | None = None, geometr
         pole_vars["selected_noise_coupled"] = (("mode",), np.asarray(sel.noise_coupled, np.int8),
                                                {"long_name": "every pole of the mode is noise-coupled: it may be "
                                                              "noise, not a mode"})
+        pole_vars["selected_order_discrepancy"] = (
+            ("mode",), np.asarray(sel.order_discrepancy, np.int8),
+            {"long_name": "the std of f or xi includes the difference between the representative and the lowest "
+                          "sufficient order, which exceeded 1.96 std"})
         for name, values in (("mode_shape_real", sel.mode_shape.real), ("mode_shape_imag", sel.mode_shape.imag),
                              ("mode_shape_std_real", sel.mode_shape_std_real),
                              ("mode_shape_std_imag", sel.mode_shape_std_imag),
@@ -207,10 +213,14 @@ def report(diagram, selected, *, stamp: dict | None = None, extra: dict | None =
     out["units"] = {"frequency_hz": "Hz", "damping_ratio": "fraction (0.02 = 2 %)",
                     "std": f"analytic (delta-method) standard deviation, {selected.std_words}"
                            + ("" if selected.settings.representative == "lowest"
-                              else " (its poles that are not noise-coupled and not at a close cut)"),
+                              else " (its poles that are not noise-coupled and not at a close cut, or all of them "
+                                   "where most are noise-coupled; widened where order_discrepancy)"),
                     "spread": "sample standard deviation across the poles of the mode's cluster",
                     "noise_coupled": "every pole of the mode's cluster is noise-coupled (no first-order std): it "
                                      "may be noise, not a mode",
+                    "order_discrepancy": "the std of f or xi includes the difference between the mode at its "
+                                         "representative's order and at its lowest sufficient order, which "
+                                         "exceeded 1.96 std: the estimate moves with the model order",
                     "low_signal_to_noise": "H is within 3 std of its estimation noise: the modes cannot be told "
                                            "from noise",
                     "mpc": "modal phase collinearity (1: real shape), std to second order",

@@ -226,6 +226,8 @@ def _global_selected(merged, setup_modes, dof_names) -> SelectedModes:
         output_names=tuple(dof_names), has_uncertainty=has_unc,
         block_too_short=np.array([any(bool(s.block_too_short[int(idx[j, t])]) for j, s in enumerate(setup_modes)
                                       if idx[j, t] >= 0) for t in range(nm)], dtype=bool),
+        order_discrepancy=np.array([any(bool(s.order_discrepancy[int(idx[j, t])]) for j, s in enumerate(setup_modes)
+                                        if idx[j, t] >= 0) for t in range(nm)], dtype=bool),
         mode_covariance=covs)
     mpc, mpd = [], []
     for k in range(nm):

@@ -170,6 +170,10 @@ class SelectedModes:
     #: cluster is still selected (a weak physical mode below the noise floor looks the same: the
     #: simulated chain's 1.93 Hz mode on 20,000 samples); tables mark it, exports carry the flag.
     noise_coupled: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
+    #: (n_modes,) bool, ``frequency_std`` or ``damping_std`` was widened by the difference between
+    #: the representative and the cluster's lowest sufficient member, which exceeded 1.96 of their
+    #: combined σ (``settings.order_discrepancy``): the estimate moves with the model order
+    order_discrepancy: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
     #: (n_modes, 2+2l, 2+2l) covariance of [f, ξ, Re shape, Im shape] of each shape pole
     #: (``Diagram.pole_covariance``; the representative's when ``shape_representative`` is
     #: ``"median"``), or None without uncertainty. With ``settings.cluster_std == "mean"``, or a shape
@@ -203,6 +207,10 @@ class SelectedModes:
     #: the legend line below a table that marks noise-coupled modes
     NOISE_COUPLED_LEGEND = ("noise?: every pole of the mode is noise-coupled (below the noise floor of H, no "
                             "first-order std): noise, or a mode too weak to tell from it (docs/settings.md)")
+    #: the legend line below a table that marks modes whose σ the model order widened
+    ORDER_DISCREPANCY_LEGEND = ("widened: f or xi at the representative's order and at the lowest sufficient "
+                                "order differ by more than 1.96 std; the std includes that difference "
+                                "(order_discrepancy, docs/settings.md)")
 
     def __post_init__(self):
         # one flag per mode; unknown (a SelectedModes made by hand without it): none flagged
@@ -210,6 +218,10 @@ class SelectedModes:
         if flags.shape != np.shape(self.frequency_hz):
             flags = np.zeros(np.shape(self.frequency_hz), bool)
         object.__setattr__(self, "noise_coupled", flags)
+        widened = np.asarray(self.order_discrepancy, bool)
+        if widened.shape != np.shape(self.frequency_hz):
+            widened = np.zeros(np.shape(self.frequency_hz), bool)
+        object.__setattr__(self, "order_discrepancy", widened)
         # unknown (made by hand): the shape is the representative's
         if self.shape_pole is None:
             object.__setattr__(self, "shape_pole", np.asarray(self.representative_pole, np.int64))
@@ -232,7 +244,8 @@ class SelectedModes:
         """One row per mode, numbered from 1 (the index ``mode``, as in every table, plot and
         export): f, σ_f, spread, ξ, σ_ξ, spread, cluster size and orders, and the shape per
         channel in columns ``mode_shape_<channel>_real`` ...; ``noise_coupled`` flags a mode every
-        pole of which is noise-coupled (:attr:`noise_coupled`), ``low_signal_to_noise`` (the same
+        pole of which is noise-coupled (:attr:`noise_coupled`), ``order_discrepancy`` one whose σ
+        the model order widened (:attr:`order_discrepancy`), ``low_signal_to_noise`` (the same
         in every row) an identification whose modes cannot be told from noise."""
         import pandas as pd
 
@@ -244,7 +257,7 @@ class SelectedModes:
             "representative_order": self.representative_order, "shape_order": self.shape_order,
             "n_poles": self.n_poles,
             "order_min": self.order_min, "order_max": self.order_max, "min_mac": self.min_mac,
-            "noise_coupled": self.noise_coupled,
+            "noise_coupled": self.noise_coupled, "order_discrepancy": self.order_discrepancy,
             "mpc": self.mpc, "mpc_std": self.mpc_std, "mpd_deg": self.mpd_deg, "mpd_std_deg": self.mpd_std_deg,
             "low_signal_to_noise": np.full(self.n_modes, bool(self.low_signal_to_noise)),
         }
@@ -263,8 +276,9 @@ class SelectedModes:
 
     def table(self) -> str:
         """Plain-text table: f and ξ with their analytic σ and the spread across the cluster; a
-        mode every pole of which is noise-coupled is marked ``noise?`` after its row, with a legend
-        line below (nothing is added when no mode is)."""
+        mode every pole of which is noise-coupled is marked ``noise?`` after its row, one whose σ the
+        model order widened (:attr:`order_discrepancy`) ``widened``, each with a legend line below
+        (nothing is added when no mode is)."""
         head = (f"{'mode':>4}  {'f [Hz]':>9}  {'std f':>8}  {'spread f':>8}  {'xi [%]':>7}  "
                 f"{'std xi':>7}  {'spread xi':>9}  {'order':>5}  {'poles':>5}")
         def cell(x, width, digits):
@@ -278,9 +292,11 @@ class SelectedModes:
                 f"{cell(self.frequency_spread[i], 8, 4)}  {100 * self.damping_ratio[i]:>7.3f}  "
                 f"{cell(100 * self.damping_std[i], 7, 3)}  {cell(100 * self.damping_spread[i], 9, 3)}  "
                 f"{int(self.representative_order[i]):>5}  {int(self.n_poles[i]):>5}"
-                + ("  noise?" if flags[i] else ""))
+                + ("  noise?" if flags[i] else "") + ("  widened" if self.order_discrepancy[i] else ""))
         if flags.any():
             lines.append(self.NOISE_COUPLED_LEGEND)
+        if self.order_discrepancy.any():
+            lines.append(self.ORDER_DISCREPANCY_LEGEND)
         return "\n".join(lines)
 
     @property
@@ -444,6 +460,7 @@ def select_modes(diagram, settings: ClusteringSettings | None = None, **kwargs) 
         max_frequency_std_per_bandwidth=float(sel.max_frequency_std_per_bandwidth),
         frequency_damping_correlation=sel.frequency_damping_correlation,
         block_too_short=np.asarray(sel.block_too_short, bool),
+        order_discrepancy=np.asarray(sel.order_discrepancy, bool),
         # from the diagram's per-pole flags: every member of the cluster noise-coupled
         noise_coupled=np.array([m.size > 0 and bool(np.asarray(diagram.noise_coupled, bool)[m].all())
                                 for m in (np.asarray(m, np.int64) for m in sel.members)], dtype=bool),
@@ -466,9 +483,9 @@ def _shape_indicators(diagram, modes: SelectedModes) -> dict:
         if all(c is not None for c in found):
             covs = np.stack(found)
             # per mode: one whose shape pole is its representative keeps that pole's covariance,
-            # unless its σ are the cluster mean's
+            # unless its σ are the cluster mean's or were widened by the model order
             which = (np.asarray(modes.shape_pole) != np.asarray(modes.representative_pole)) | (
-                modes.settings.cluster_std == "mean")
+                modes.settings.cluster_std == "mean") | modes.order_discrepancy
             covs = _with_cluster_std(covs, modes, which)
     factors = None
     pole_shape_factor = getattr(diagram, "pole_shape_factor", None)

@@ -481,6 +481,16 @@ class ClusteringSettings:
         their scatter to 0.96–1.26 (docs/shapes.md §6, with the measured records' split halves).
         ``"median"``: the representative itself (the choice before 2026-11-27). With
         ``representative="lowest"`` both are that pole.
+    order_discrepancy : bool
+        Widen σ_f and σ_ξ where the model order moves the estimate beyond them (default True):
+        where the representative's f (or ξ) differs from the cluster's lowest sufficient member's
+        (the default shape pole) by more than 1.96 of their combined σ, the mode's σ becomes
+        √(σ² + difference²) and ``SelectedModes.order_discrepancy`` says so. Above the true order a
+        spurious pole can take part of a mode at every order from some order on and bias its
+        damping by several σ, which no one pole's first-order σ sees. On the simulations it fires
+        for about 5 % of the output-only modes and 2 % of the input/output ones, and brings the
+        output-only coverage of ±1.96 σ to 0.92–0.96 for every mode (docs/validation.md, issue 27
+        (h)). False: the σ of the reliable poles alone (before 2026-11-27).
     """
 
     distance_threshold: float = _CLUSTERING["distance_threshold"]
@@ -501,6 +511,7 @@ class ClusteringSettings:
     cluster_std: str | None = None
     representative: str = _CLUSTERING["representative"]
     shape_representative: str = _CLUSTERING["shape_representative"]
+    order_discrepancy: bool = _CLUSTERING["order_discrepancy"]
 
     def __post_init__(self):
         check_real("distance_threshold", self.distance_threshold, low=0, low_open=True)
@@ -509,7 +520,7 @@ class ClusteringSettings:
         check_real("min_cluster_fraction", self.min_cluster_fraction, low=0, high=1, low_open=True)
         check_real("max_frequency_std_per_bandwidth", self.max_frequency_std_per_bandwidth, low=0, low_open=True,
               allow_none=True)
-        for name in ("per_cluster_min_size", "merge_fragments", "drop_doublets"):
+        for name in ("per_cluster_min_size", "merge_fragments", "drop_doublets", "order_discrepancy"):
             object.__setattr__(self, name, check_boolean(name, getattr(self, name)))  # a bool, as to_dict gives
         check_real("doublet_window", self.doublet_window, low=0)
         check_real("doublet_min_mac", self.doublet_min_mac, low=0, high=1)

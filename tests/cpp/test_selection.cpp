@@ -259,6 +259,71 @@ TEST_CASE("selection: a representative below 2 m never gives the shape") {
     CHECK(modaluq::select_modes(d, o).shape_order(0) == 6);
 }
 
+TEST_CASE("selection: a mode whose damping moves with the order beyond its sigma has its sigma widened") {
+    // One mode over orders 4..40: xi 2 % up to order 20, 0.5 % above (a spurious pole took part of
+    // it), sigma_xi 5 % of xi. k* = 10: the lowest sufficient member is order 10, the representative
+    // (nearest to the median xi, 0.5 %; ties to the higher order) order 40.
+    std::map<Index, std::vector<P>> by_order;
+    for (Index n = 4; n <= 40; n += 2) by_order[n] = {{10.0, n <= 20 ? 0.02 : 0.005, 0}};
+    modaluq::Diagram d = all_stable(by_order);
+    d.poles.noise_floor_order = 10;
+    modaluq::ClusteringOptions o;
+    CHECK(o.order_discrepancy);
+    const auto s = modaluq::select_modes(d, o);
+    REQUIRE(s.n_modes() == 1);
+    CHECK(s.representative_order(0) == 40);
+    CHECK(s.shape_order(0) == 10);
+    // the median sigma_xi (ten poles at 2.5e-4, nine at 1e-3) with the difference 0.015 added:
+    // 0.015 > 1.96 * hypot(2.5e-4, 1e-3); f does not move and keeps its sigma
+    CHECK(s.damping_std(0) == doctest::Approx(std::hypot(2.5e-4, 0.015)).epsilon(1e-12));
+    CHECK(s.frequency_std(0) == doctest::Approx(1e-2).epsilon(1e-12));
+    CHECK(s.order_discrepancy(0));
+    CHECK(s.damping_ratio(0) == 0.005);  // the value is the representative's still
+    o.order_discrepancy = false;
+    const auto off = modaluq::select_modes(d, o);
+    CHECK(off.damping_std(0) == doctest::Approx(2.5e-4).epsilon(1e-12));
+    CHECK_FALSE(off.order_discrepancy(0));
+    CHECK(off.representative_pole(0) == s.representative_pole(0));
+    // the mode read at the lowest sufficient order has nothing to compare with
+    o.order_discrepancy = true;
+    o.representative = modaluq::Representative::lowest;
+    const auto lowest = modaluq::select_modes(d, o);
+    CHECK_FALSE(lowest.order_discrepancy(0));
+    CHECK(lowest.damping_std(0) == doctest::Approx(1e-3).epsilon(1e-12));
+    // a difference within the two sigma is the estimates' own scatter: nothing widened
+    for (Index n = 22; n <= 40; n += 2) by_order[n] = {{10.0, 0.0195, 0}};
+    modaluq::Diagram close = all_stable(by_order);
+    close.poles.noise_floor_order = 10;
+    const auto within = modaluq::select_modes(close);
+    REQUIRE(within.n_modes() == 1);
+    CHECK_FALSE(within.order_discrepancy(0));
+    CHECK(within.damping_std(0) == doctest::Approx(0.05 * 0.0195).epsilon(1e-12));
+}
+
+TEST_CASE("selection: a cluster most of whose poles are noise-coupled takes the sigma of all of them") {
+    // Orders 4..40 (19 poles) of one mode. The noise-coupled poles carry their unfrozen sigma_f
+    // 0.1 Hz; the others the frozen 0.01 Hz.
+    auto diagram = [](auto coupled) {
+        std::map<Index, std::vector<P>> by_order;
+        for (Index n = 4; n <= 40; n += 2) {
+            P p{10.0, 0.02, 0, coupled(n) ? 0.1 : 0.01};
+            p.coupled = coupled(n);
+            by_order[n] = {p};
+        }
+        return all_stable(by_order);
+    };
+    // all but order 24 coupled: that one pole's frozen sigma is not the mode's
+    const auto most = modaluq::select_modes(diagram([](Index n) { return n != 24; }));
+    REQUIRE(most.n_modes() == 1);
+    CHECK(most.frequency_std(0) == doctest::Approx(0.1).epsilon(1e-12));
+    CHECK(most.representative_order(0) == 40);  // every pole a candidate; ties to the higher order
+    // nine of nineteen coupled: the ten others are the mode's reliable poles
+    const auto some = modaluq::select_modes(diagram([](Index n) { return n <= 20; }));
+    REQUIRE(some.n_modes() == 1);
+    CHECK(some.frequency_std(0) == doctest::Approx(0.01).epsilon(1e-12));
+    CHECK(some.representative_order(0) == 40);
+}
+
 TEST_CASE("selection: a cluster whose frequency is less certain than its peak's bandwidth is dropped") {
     // Two stable columns over 10 orders: a 2 %-damped mode with sigma_f = 0.1 % of f
     // (sigma_f / (f xi) = 0.05) and a 0.5 %-damped column with sigma_f = 1 % of f (ratio 2).

@@ -372,19 +372,22 @@ def select_modes_reference(diagram: Diagram, settings: ClusteringSettings | None
     sf_med = np.full(n_modes, np.nan)
     sxi_med = np.full(n_modes, np.nan)
     rho = np.full(n_modes, np.nan)
+    widened = np.zeros(n_modes, dtype=bool)
     mode_of_pole = np.full(diagram.n_poles, -1, dtype=np.int64)
     for k, members in enumerate(kept):
         mode_of_pole[members] = k
         med = np.median(f[members])
         # the representative's σ is read from it: not at a cut inside a cluster, not noise-coupled
-        candidates = members[~(diagram.close_singular_values[members] | diagram.noise_coupled[members])]
+        # (unless most of the cluster is: then the coupled poles count, with their unfrozen σ)
+        coupled = diagram.noise_coupled[members] & ~(2 * diagram.noise_coupled[members].sum() > members.size)
+        candidates = members[~(diagram.close_singular_values[members] | coupled)]
         if candidates.size == 0:
             candidates = members
         ddof = 1 if members.size > 1 else 0
         f_spread[k] = np.std(f[members], ddof=ddof)
         xi_spread[k] = np.std(xi[members], ddof=ddof)
         finite = np.isfinite(diagram.frequency_std[members]) & np.isfinite(diagram.damping_std[members])
-        unflagged = ~(diagram.close_singular_values[members] | diagram.noise_coupled[members])
+        unflagged = ~(diagram.close_singular_values[members] | coupled)
         reliable, with_std = members[finite & unflagged], members[finite]
 
         def scale(std, spread):
@@ -421,7 +424,16 @@ def select_modes_reference(diagram: Diagram, settings: ClusteringSettings | None
         # the shape pole (shape_representative "lowest"): the lowest sufficient member, unless the
         # representative is lower and holds every selected mode (order >= 2 m)
         keep_rep = diagram.order[rep[k]] >= 2 * n_modes and diagram.order[lowest_member] >= diagram.order[rep[k]]
-        sp[k] = lowest_member if settings.shape_representative == "lowest" and not keep_rep else rep[k]
+        sufficient = rep[k] if keep_rep else lowest_member
+        sp[k] = sufficient if settings.shape_representative == "lowest" else rep[k]
+        if settings.order_discrepancy and sufficient != rep[k]:
+            # the representative against the lowest sufficient member: a difference beyond 1.96
+            # combined σ is the model order's, added to the mode's σ
+            for sig, v, own in ((sf_med, f, diagram.frequency_std), (sxi_med, xi, diagram.damping_std)):
+                d = v[rep[k]] - v[sufficient]
+                if abs(d) > 1.96 * np.hypot(sig[k], own[sufficient]):
+                    sig[k] = np.hypot(sig[k], d)
+                    widened[k] = True
         ref = int(np.argmax(np.abs(shape[:, sp[k]])))
         aligned = shape[:, members] / shape[ref, members][None, :]
         sh_spread_r[:, k] = np.std(aligned.real, axis=1, ddof=ddof)
@@ -450,5 +462,5 @@ def select_modes_reference(diagram: Diagram, settings: ClusteringSettings | None
         frequency_std_per_bandwidth=np.array([std_per_bandwidth(m) if diagram.has_uncertainty else np.nan
                                               for m in kept]),
         min_cluster_size=int(smallest), output_names=diagram.output_names, settings=settings,
-        has_uncertainty=diagram.has_uncertainty, frequency_damping_correlation=rho,
+        has_uncertainty=diagram.has_uncertainty, frequency_damping_correlation=rho, order_discrepancy=widened,
     )

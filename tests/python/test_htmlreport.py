@@ -134,6 +134,19 @@ def test_the_table_gives_the_shape_order_where_it_is_not_the_representatives(tmp
     assert "shape order" not in write_html_report(tmp_path / "b.html", d, at_rep).read_text(encoding="utf-8")
 
 
+def test_the_table_marks_a_mode_whose_sigma_the_model_order_widened(tmp_path):
+    # the chain record of test_stabilization_core.py whose 14.5 Hz mode moves with the order
+    sim = modaluq.simulate(20_000, seed=7170)
+    d = modaluq.identify(sim.y, fs=sim.fs, frequency_range=(1, 20)).stabilization_diagram()
+    sel = d.select_modes()
+    assert sel.order_discrepancy.any()
+    text = write_html_report(tmp_path / "a.html", d, sel).read_text(encoding="utf-8")
+    assert text.count("<td>widened</td>") + text.count("<td>noise? widened</td>") == sel.order_discrepancy.sum()
+    assert "widened: f or ξ at the representative" in text
+    off = d.select_modes(order_discrepancy=False)
+    assert "<td>widened</td>" not in write_html_report(tmp_path / "b.html", d, off).read_text(encoding="utf-8")
+
+
 def test_refusals(tmp_path, chain):
     result = modaluq.identify(chain.y, fs=chain.fs, block_rows=15, orders=range(2, 31, 2))
     d = result.stabilization_diagram()

@@ -27,6 +27,12 @@ def _records():
                                                               orders=range(2, 31, 2), uncertainty=False),
         "frame, two inputs": lambda: modaluq.identify(frame.y, frame.u, fs=frame.fs, block_rows=12,
                                                       orders=range(2, 45, 1)),
+        # the engineer's call on two records of studies/selected_members_mc.py where the new rules
+        # act: 17 Hz mostly noise-coupled (k* 8 < 12), 14.5 Hz damping 1.6 % below order 22, 0.4 % above
+        "chain output-only, mostly coupled": lambda: modaluq.identify(
+            modaluq.simulate(20_000, seed=7034).y, fs=50.0, frequency_range=(1, 20)),
+        "chain output-only, order discrepancy": lambda: modaluq.identify(
+            modaluq.simulate(20_000, seed=7170).y, fs=50.0, frequency_range=(1, 20)),
         # a multi-setup merge: its selection reports the sigma of the cluster's mean by default
         "campaign, merged": lambda: modaluq.identify_setups(
             simulate_campaign(4, durations=(120.0, 140.0, 110.0, 130.0, 150.0, 120.0)).frames(), fs=25.0,
@@ -43,7 +49,8 @@ CLUSTERING = [{}, {"linkage": "single"}, {"linkage": "complete", "distance_thres
               {"per_cluster_min_size": True, "max_frequency_std_per_bandwidth": 0.3},
               {"max_frequency_std_per_bandwidth": None}, {"cluster_std": "mean"}, {"cluster_std": "median"},
               {"representative": "lowest"}, {"representative": "lowest", "cluster_std": "mean"},
-              {"shape_representative": "median"}, {"shape_representative": "median", "cluster_std": "mean"}]
+              {"shape_representative": "median"}, {"shape_representative": "median", "cluster_std": "mean"},
+              {"order_discrepancy": False}, {"order_discrepancy": False, "cluster_std": "mean"}]
 
 
 @pytest.fixture(scope="module")
@@ -83,7 +90,7 @@ def assert_same_selection(core, ref):
     for name in ("frequency_hz", "damping_ratio", "frequency_std", "damping_std", "frequency_spread",
                  "damping_spread", "mode_shape_spread_real", "mode_shape_spread_imag", "min_mac"):
         np.testing.assert_allclose(getattr(core, name), getattr(ref, name), rtol=1e-9, atol=1e-13, err_msg=name)
-    for name in ("n_poles", "order_min", "order_max", "representative_order", "shape_order"):
+    for name in ("n_poles", "order_min", "order_max", "representative_order", "shape_order", "order_discrepancy"):
         np.testing.assert_array_equal(getattr(core, name), getattr(ref, name), err_msg=name)
     assert core.settings.cluster_std == ref.settings.cluster_std
     if core.settings.cluster_std == "mean":  # the correlation of the mean, from the same rows
@@ -108,6 +115,33 @@ def test_core_selection_equals_the_scipy_reference(results, record, clustering):
     assert_same_selection(core, ref)
     if not clustering:
         assert core.n_modes >= 2  # the comparison covers real clusters, not an empty selection
+
+
+def test_the_two_records_exercise_the_rules_they_are_here_for(results):
+    """The 17 Hz mode of the first record has one pole under the coupling limit among many coupled
+    ones: its σ_f is now theirs (their median), about 10x the lone pole's. The 14.5 Hz mode of the
+    second has its damping σ widened by the model order."""
+    d = modaluq.stabilization_diagram(results["chain output-only, mostly coupled"])
+    sel = d.select_modes()
+    k = int(np.argmin(np.abs(sel.frequency_hz - 17.0)))
+    m = np.asarray(sel.members[k])
+    coupled = d.noise_coupled[m]
+    assert 2 * coupled.sum() > m.size and (~coupled).any()
+    assert sel.frequency_std[k] == pytest.approx(np.median(d.frequency_std[m]), rel=1e-12)
+    assert sel.frequency_std[k] > 5 * np.max(d.frequency_std[m[~coupled]])
+    d = modaluq.stabilization_diagram(results["chain output-only, order discrepancy"])
+    sel, off = d.select_modes(), d.select_modes(order_discrepancy=False)
+    k = int(np.argmin(np.abs(sel.frequency_hz - 14.49)))
+    assert sel.order_discrepancy[k] and not off.order_discrepancy.any()
+    assert sel.damping_std[k] > 3 * off.damping_std[k]
+    diff = sel.damping_ratio[k] - d.damping_ratio[sel.shape_pole[k]]
+    assert sel.damping_std[k] == pytest.approx(np.hypot(off.damping_std[k], diff), rel=1e-12)
+    assert "widened" in sel.table() and sel.ORDER_DISCREPANCY_LEGEND in sel.table()
+    assert "widened" not in off.table()
+    # the mode's covariance carries the widened σ; the other modes' are their poles' own
+    assert sel.mode_covariance[k, 1, 1] == pytest.approx(sel.damping_std[k] ** 2, rel=1e-12)
+    assert sel.to_dataframe()["order_discrepancy"].tolist() == list(sel.order_discrepancy)
+    assert sel.to_dict()["modes"][k]["order_discrepancy"] is True
 
 
 def test_a_high_noise_floor_keeps_a_lower_representatives_shape_as_the_reference_does(results):

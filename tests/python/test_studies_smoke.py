@@ -48,7 +48,7 @@ def test_every_study_is_smoke_tested():
                                            "io_block_bias.py", "poser_mc.py", "pyoma2_multisetup.py",
                                            "split_halves_pool.py", "block_scaling_mc.py",
                                            "above_order_diagnosis.py", "partial_unfreeze_mc.py",
-                                           "bootstrap_sigma_mc.py", "coupling_sketch.py"}
+                                           "bootstrap_sigma_mc.py", "coupling_sketch.py", "selected_members_mc.py"}
     assert scripts == tested
 
 
@@ -75,6 +75,19 @@ def test_selected_sigma_mc(capsys):
     assert set(out) == {"input/output", "output-only", "input/output, cluster mean", "output-only, cluster mean"}
     assert out["output-only"].shape == (2, 6, 4)
     assert "| mode | f (Hz) | found |" in capsys.readouterr().out
+
+
+def test_selected_members_mc(capsys, tmp_path):
+    mod = _module("selected_members_mc")
+    out = tmp_path / "frame.pkl"
+    data = mod.run(3, "frame", out, duration=60.0)
+    assert set(data["records"]) == {"OO", "IO"} and len(data["records"]["OO"]) == 3
+    row = next(r for r in data["records"]["OO"][0] if "default" in r)
+    assert {"default", "no order check", "mean", "lowest", "members", "widened", "k_star"} <= set(row)
+    assert len(row["members"]["order"]) == len(row["members"]["coupled"]) > 0
+    mod.report([str(out)])
+    text = capsys.readouterr().out
+    assert "| no order check |" in text and "σ widened by the order" in text
 
 
 @pytest.mark.slow

@@ -116,6 +116,10 @@ def add_analysis_options(p: argparse.ArgumentParser) -> None:
                         "cluster's member at the lowest order that holds every selected mode and is not below the "
                         "noise floor, whose shape std is calibrated; f and xi stay the representative's "
                         f"(docs/shapes.md) (default {k.shape_representative})")
+    g.add_argument("--no-order-discrepancy", action="store_true",
+                   help="do not widen a mode's std where its f or damping at the representative's order and at the "
+                        "lowest sufficient order differ by more than 1.96 std (the table marks such modes "
+                        "'widened'; docs/settings.md)")
 
 
 def _given(args, names) -> dict:
@@ -134,7 +138,8 @@ def analysis_settings(args) -> tuple:
     try:
         settings = Settings(**_given(args, SETTINGS_OPTIONS), **({"uncertainty": False} if args.no_uncertainty else {}))
         criteria = StabilityCriteria(**_given(args, CRITERIA_OPTIONS))
-        clustering = ClusteringSettings(**_given(args, CLUSTERING_OPTIONS))
+        clustering = ClusteringSettings(**_given(args, CLUSTERING_OPTIONS),
+                                        **({"order_discrepancy": False} if args.no_order_discrepancy else {}))
     except (TypeError, ValueError) as exc:  # "min_mac must be ..." -> "--min-mac must be ..."
         raise option_error(exc, options) from None
     return settings, criteria, clustering

@@ -87,7 +87,8 @@ def run_split_halves(args) -> int:
             given["block_correlation_correction"] = True
         settings = Settings(**given, **({"orders": args.order} if args.order is not None else {}))
         clustering = ClusteringSettings(**{k: getattr(args, k) for k in ("representative", "shape_representative")
-                                           if getattr(args, k) is not None})
+                                           if getattr(args, k) is not None},
+                                        **({"order_discrepancy": False} if args.no_order_discrepancy else {}))
         analysis = Analysis.from_file(args.split_halves, fs=args.fs, format=args.format,
                                       read_options=parse_read_options(args.read_option), outputs=args.outputs,
                                       inputs=args.inputs, settings=settings, clustering=clustering)
@@ -111,7 +112,8 @@ def run_split_halves(args) -> int:
 def run(args) -> int:
     if args.split_halves is not None:
         return run_split_halves(args)
-    bad = [_option(k) for k in RECORD_ONLY if getattr(args, k) is not None]
+    bad = [_option(k) for k in RECORD_ONLY if getattr(args, k) is not None] + (
+        ["--no-order-discrepancy"] if args.no_order_discrepancy else [])
     if bad:
         raise CliError(f"{', '.join(bad)}: option(s) of --split-halves FILE (a measured record)")
     given = {keyword: getattr(args, option) for option, keyword in KEYWORDS.items()
@@ -228,6 +230,9 @@ def register(subparsers) -> None:
                    help="which pole of each mode's cluster is compared, as for modaluq identify (default median)")
     g.add_argument("--shape-representative", choices=("median", "lowest"), default=None,
                    help="which pole gives each mode's shape, as for modaluq identify (default lowest)")
+    g.add_argument("--no-order-discrepancy", action="store_true",
+                   help="do not widen a mode's std by the difference between its representative and its lowest "
+                        "sufficient order, as for modaluq identify")
     v.add_argument("--out", metavar="DIR", default=None,
                    help="directory for report.md, results.csv, summary.csv, results.npz and the histogram PNGs "
                         "(--split-halves: report.md and pairs.csv)")

@@ -346,3 +346,12 @@ def test_bootstrap_draws_reaches_the_identification(small_csv):
     assert main(["identify", str(small_csv), "--out", str(out), "--bootstrap-draws", "10", *FAST_ARGS]) == 0
     report = json.loads(out.read_text())
     assert report["stamp"]["settings"]["identification"]["bootstrap_draws"] == 10
+
+
+def test_no_order_discrepancy_reaches_the_selection(small_csv):
+    # docs/settings.md: the clustering option, recorded with the selected modes
+    out = small_csv.parent / "modes.json"
+    assert main(["identify", str(small_csv), "--out", str(out), "--no-order-discrepancy", *FAST_ARGS]) == 0
+    assert json.loads(out.read_text())["clustering"]["clustering"]["order_discrepancy"] is False
+    assert main(["identify", str(small_csv), "--out", str(out), "--overwrite", *FAST_ARGS]) == 0
+    assert json.loads(out.read_text())["clustering"]["clustering"]["order_discrepancy"] is True

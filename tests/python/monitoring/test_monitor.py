@@ -67,6 +67,10 @@ def test_resume_runs_nothing_done_and_refuses_other_settings(campaign, tmp_path)
     # other settings: refused, naming what differs and how to start again
     with pytest.raises(ValueError, match=r"other settings \(settings\.orders differ\).*--no-resume"):
         monitor(campaign.records[:8], settings=SETTINGS.replace(orders=(2, 4, 6, 8)), out=out, progress=False)
+    # a clustering option counts, by its dotted name (a store made before order_discrepancy's default)
+    with pytest.raises(ValueError, match=r"other settings \(clustering\.order_discrepancy differ\)"):
+        monitor(campaign.records[:8], settings=SETTINGS, out=out, progress=False,
+                clustering=modaluq.ClusteringSettings(order_discrepancy=False))
     assert monitor(campaign.records[:8], settings=SETTINGS, out=out, progress=False, resume=False,
                    tracking=TrackingSettings(reference_records=4)).n_run == 8
 

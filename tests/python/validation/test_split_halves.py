@@ -119,6 +119,11 @@ def test_cli_split_halves_reads_the_modes_at_the_representative_asked_for(record
     analysis = Analysis.from_file(csv, settings=SETTINGS,
                                   clustering=modaluq.ClusteringSettings(shape_representative="lowest"))
     assert capsys.readouterr().out == split_halves(analysis).report()
+    assert main([*argv, "--no-order-discrepancy"]) == 0
+    analysis = Analysis.from_file(csv, settings=SETTINGS,
+                                  clustering=modaluq.ClusteringSettings(order_discrepancy=False))
+    assert analysis.clustering.order_discrepancy is False
+    assert capsys.readouterr().out == split_halves(analysis).report()
 
 
 @pytest.mark.parametrize("argv, message", [
@@ -126,6 +131,7 @@ def test_cli_split_halves_reads_the_modes_at_the_representative_asked_for(record
     (["--fs", "10"], "--fs: option(s) of --split-halves FILE"),
     (["--representative", "lowest"], "--representative: option(s) of --split-halves FILE"),
     (["--shape-representative", "lowest"], "--shape-representative: option(s) of --split-halves FILE"),
+    (["--no-order-discrepancy"], "--no-order-discrepancy: option(s) of --split-halves FILE"),
     (["--split-halves", "missing.csv"], "missing.csv"),
 ])
 def test_cli_split_halves_options_are_checked(argv, message, capsys):
