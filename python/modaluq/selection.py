@@ -105,7 +105,8 @@ class SelectedModes:
     (by default the cluster's pole at the lowest sufficient order, or the representative where it
     is lower and holds every selected mode, ``settings.shape_representative``; analytic, delta-method σ at
     ``shape_order``); ``frequency_std`` and ``damping_std`` are the cluster's
-    (``settings.cluster_std``: the median of its reliable poles' σ, or the σ of their mean);
+    (``settings.cluster_std``: the median of its reliable poles' σ, or the σ of their mean),
+    widened where the model order moves the estimate beyond them (``order_discrepancy``);
     the ``*_spread`` fields are the sample standard deviations (ddof=1) across the cluster's
     members, a measure of the order-to-order scatter shown beside the analytic σ (0 for a
     single member).
@@ -115,7 +116,7 @@ class SelectedModes:
     damping_ratio: np.ndarray          #: (n_modes,) fraction
     mode_shape: np.ndarray             #: (n_outputs, n_modes) complex, largest component 1
     #: (n_modes,) Hz, analytic: over the cluster's reliable poles, their median σ or the σ of their
-    #: mean (``settings.cluster_std``; NaN without uncertainty)
+    #: mean (``settings.cluster_std``; NaN without uncertainty), widened where :attr:`order_discrepancy`
     frequency_std: np.ndarray
     damping_std: np.ndarray            #: (n_modes,) fraction, analytic, as ``frequency_std``
     mode_shape_std_real: np.ndarray    #: (n_outputs, n_modes)
@@ -176,8 +177,9 @@ class SelectedModes:
     order_discrepancy: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
     #: (n_modes, 2+2l, 2+2l) covariance of [f, ξ, Re shape, Im shape] of each shape pole
     #: (``Diagram.pole_covariance``; the representative's when ``shape_representative`` is
-    #: ``"median"``), or None without uncertainty. With ``settings.cluster_std == "mean"``, or a shape
-    #: pole other than the representative, its f and ξ entries are the mode's: the [f, ξ] block from
+    #: ``"median"``), or None without uncertainty. With ``settings.cluster_std == "mean"``, a shape
+    #: pole other than the representative, or σ widened (:attr:`order_discrepancy`), its f and ξ
+    #: entries are the mode's: the [f, ξ] block from
     #: ``frequency_std``, ``damping_std`` and ``frequency_damping_correlation``, and their
     #: covariance with the shape the pole's correlation at those σ (the mean is formed for f and ξ only).
     mode_covariance: np.ndarray | None = None
@@ -393,16 +395,22 @@ def select_modes(diagram, settings: ClusteringSettings | None = None, **kwargs) 
        meaningful), or among all members when every member's order does; ties go to the higher
        order. Its frequency, damping ratio and shape are reported; the ``frequency_std`` and
        ``damping_std`` reported are the cluster's, from its **reliable poles** (not at a close
-       cut, not noise-coupled), so that they do not depend on the order the mode is read at:
+       cut, not noise-coupled; when most of the cluster is noise-coupled, the coupled poles count
+       too, with their unfrozen σ, for the representative and the shape pole as well), so that
+       they do not depend on the order the mode is read at:
        the median of their σ (``settings.cluster_std="median"``, one record's default) or the σ
        of their mean (``"mean"``, a multi-setup merge's default: its poles decorrelate across
        orders and the representative scatters like their mean, docs/uq-math.md §13.10); the
-       ``*_spread`` beside them is how much the estimate moves with the order.
+       ``*_spread`` beside them is how much the estimate moves with the order. Where the
+       representative's f or ξ and the lowest sufficient member's differ by more than 1.96 of
+       the two poles' combined σ, the difference is added to the σ in quadrature
+       (``settings.order_discrepancy``, :attr:`SelectedModes.order_discrepancy`).
     7. a mode every member of which is noise-coupled is flagged (:attr:`SelectedModes.noise_coupled`,
        from ``Diagram.noise_coupled`` of its members), not dropped: the selection does not change.
 
     Noise-coupled poles (``Diagram.noise_coupled``, docs/uq-math.md §5.5) are clustered (a weak
-    physical mode below the noise floor has them at every order) but never give the σ.
+    physical mode below the noise floor has them at every order) but give the σ only where they
+    are most of their cluster.
 
     Parameters
     ----------

@@ -447,7 +447,7 @@ class ClusteringSettings:
     cluster_std : {None, "median", "mean"}
         Which σ_f and σ_ξ each selected mode reports; the selected value is the representative
         pole's either way. ``"median"``: the median of the σ of the cluster's reliable poles (not
-        at a close singular-value cut, not noise-coupled), one order's σ. ``"mean"``: the σ of the
+        at a close singular-value cut, not noise-coupled unless most of the cluster is), one order's σ. ``"mean"``: the σ of the
         mean of those poles' estimates, ``‖(1/K) Σ_m u_m‖`` from each pole's first-order factor
         rows (``Modes.frequency_damping_factor``; docs/uq-math.md §13.10), which the selected
         value scatters like when the poles of one run decorrelate across orders; the median
@@ -490,7 +490,8 @@ class ClusteringSettings:
         damping by several σ, which no one pole's first-order σ sees. On the simulations it fires
         for about 5 % of the output-only modes and 2 % of the input/output ones, and brings the
         output-only coverage of ±1.96 σ to 0.92–0.96 for every mode (docs/validation.md, issue 27
-        (h)). False: the σ of the reliable poles alone (before 2026-11-27).
+        (h)). False: no widening, as before 2026-11-27 (the other rule of that change, a mostly
+        noise-coupled cluster's σ over all its poles, has no switch).
     """
 
     distance_threshold: float = _CLUSTERING["distance_threshold"]

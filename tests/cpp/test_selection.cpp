@@ -290,6 +290,25 @@ TEST_CASE("selection: a mode whose damping moves with the order beyond its sigma
     const auto lowest = modaluq::select_modes(d, o);
     CHECK_FALSE(lowest.order_discrepancy(0));
     CHECK(lowest.damping_std(0) == doctest::Approx(1e-3).epsilon(1e-12));
+    // judged on the two poles' own sigma, not the cluster's: a representative whose own sigma_xi
+    // (1 %) covers the difference is not widened, though the median sigma (2.5e-4) would not cover it
+    o = modaluq::ClusteringOptions{};
+    by_order[40] = {{10.0, 0.005, 0, -1, 0.01}};
+    modaluq::Diagram loose = all_stable(by_order);
+    loose.poles.noise_floor_order = 10;
+    const auto own = modaluq::select_modes(loose, o);
+    REQUIRE(own.n_modes() == 1);
+    CHECK(own.representative_order(0) == 40);
+    CHECK_FALSE(own.order_discrepancy(0));
+    CHECK(own.damping_std(0) == doctest::Approx(2.5e-4).epsilon(1e-12));
+    // without uncertainty nothing is judged
+    modaluq::Diagram bare = d;
+    bare.poles.damping_std.setConstant(std::numeric_limits<double>::quiet_NaN());
+    bare.poles.frequency_std.setConstant(std::numeric_limits<double>::quiet_NaN());
+    bare.poles.has_uncertainty = false;
+    const auto none = modaluq::select_modes(bare, o);
+    REQUIRE(none.n_modes() == 1);
+    CHECK_FALSE(none.order_discrepancy(0));
     // a difference within the two sigma is the estimates' own scatter: nothing widened
     for (Index n = 22; n <= 40; n += 2) by_order[n] = {{10.0, 0.0195, 0}};
     modaluq::Diagram close = all_stable(by_order);

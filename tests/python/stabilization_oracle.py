@@ -427,11 +427,11 @@ def select_modes_reference(diagram: Diagram, settings: ClusteringSettings | None
         sufficient = rep[k] if keep_rep else lowest_member
         sp[k] = sufficient if settings.shape_representative == "lowest" else rep[k]
         if settings.order_discrepancy and sufficient != rep[k]:
-            # the representative against the lowest sufficient member: a difference beyond 1.96
-            # combined σ is the model order's, added to the mode's σ
+            # the representative against the lowest sufficient member: a difference beyond 1.96 of
+            # their combined σ is the model order's, added to the mode's σ
             for sig, v, own in ((sf_med, f, diagram.frequency_std), (sxi_med, xi, diagram.damping_std)):
                 d = v[rep[k]] - v[sufficient]
-                if abs(d) > 1.96 * np.hypot(sig[k], own[sufficient]):
+                if abs(d) > 1.96 * np.hypot(own[rep[k]], own[sufficient]):  # the two poles' own σ
                     sig[k] = np.hypot(sig[k], d)
                     widened[k] = True
         ref = int(np.argmax(np.abs(shape[:, sp[k]])))

@@ -156,6 +156,17 @@ def test_poser_selects_each_setup_with_the_clustering_and_criteria_given(campaig
         np.testing.assert_array_equal(sel.shape_pole, expected.representative_pole)
     assert out.select_modes().settings == out.setup_modes[0].settings
     assert out.select_modes().settings != poser.select_modes().settings
+    # the criteria reached the diagrams: a looser frequency change lets more poles be stable
+    assert sum(int(np.sum(sel.n_poles)) for sel in out.setup_modes) != sum(
+        int(np.sum(sel.n_poles)) for sel in poser.setup_modes)
+
+
+def test_a_merged_mode_is_flagged_where_any_setups_mode_was_widened(poser):
+    sel = poser.select_modes()
+    for t in range(sel.n_modes):
+        expected = any(bool(s.order_discrepancy[poser.mode_index[j, t]]) for j, s in enumerate(poser.setup_modes)
+                       if poser.mode_index[j, t] >= 0)
+        assert sel.order_discrepancy[t] == expected
 
 
 def test_selection_settings_are_refused_by_name_where_they_do_not_apply(campaign):

@@ -33,8 +33,8 @@ def _cases():
     """name -> a function making a run Analysis (the simulated chain and the wind-turbine record).
     Each mode's shape is read at its representative (``shape_representative="median"``) and its σ
     is the reliable poles' alone (``order_discrepancy=False``), as when the expected output was
-    written: the words are compared, and the default's extra "shapes:" line and "widened" mark are
-    tested in test_stabilization.py."""
+    written: the words are compared; the default's extra "shapes:" line is tested in
+    test_stabilization.py, its "widened" mark in test_stabilization_core.py and test_htmlreport.py."""
     import modaluq
     from modaluq import Analysis, Settings
 

@@ -138,10 +138,18 @@ def test_the_two_records_exercise_the_rules_they_are_here_for(results):
     assert sel.damping_std[k] == pytest.approx(np.hypot(off.damping_std[k], diff), rel=1e-12)
     assert "widened" in sel.table() and sel.ORDER_DISCREPANCY_LEGEND in sel.table()
     assert "widened" not in off.table()
-    # the mode's covariance carries the widened σ; the other modes' are their poles' own
+    # the mode's covariance carries the widened σ, also where its shape pole is its representative
     assert sel.mode_covariance[k, 1, 1] == pytest.approx(sel.damping_std[k] ** 2, rel=1e-12)
+    at_rep = d.select_modes(shape_representative="median")
+    assert at_rep.order_discrepancy[k] and at_rep.shape_pole[k] == at_rep.representative_pole[k]
+    assert at_rep.damping_std[k] == pytest.approx(sel.damping_std[k], rel=1e-12)
+    assert at_rep.mode_covariance[k, 1, 1] == pytest.approx(at_rep.damping_std[k] ** 2, rel=1e-12)
+    # the flag in every export
     assert sel.to_dataframe()["order_discrepancy"].tolist() == list(sel.order_discrepancy)
     assert sel.to_dict()["modes"][k]["order_discrepancy"] is True
+    pytest.importorskip("xarray")
+    ds = d.to_xarray(sel)
+    assert ds["selected_order_discrepancy"].values.tolist() == [int(x) for x in sel.order_discrepancy]
 
 
 def test_a_high_noise_floor_keeps_a_lower_representatives_shape_as_the_reference_does(results):

@@ -119,8 +119,8 @@ struct ClusteringOptions {
     ClusterStd cluster_std = ClusterStd::median;
     /// Widen sigma_f and sigma_xi by the model order's own effect where it shows: where the
     /// representative's f (or xi) differs from that of the cluster's lowest sufficient member (the
-    /// default shape pole, Representative::lowest) by more than 1.96 of their combined sigma, the
-    /// reported sigma becomes sqrt(sigma^2 + difference^2) (SelectedModes::order_discrepancy).
+    /// default shape pole, Representative::lowest) by more than 1.96 of the two poles' combined
+    /// sigma, the reported sigma becomes sqrt(sigma^2 + difference^2) (SelectedModes::order_discrepancy).
     /// Above the true order a spurious pole can take part of a mode at every order from some
     /// order on, biasing its damping several sigma (the chain's 14.5 Hz mode: 1.6 % below order
     /// 22, 0.4 % above, sigma 0.1 %); no first-order sigma of one pole sees that, the two orders
@@ -578,10 +578,11 @@ inline SelectedModes select_modes(const Diagram& diagram, const ClusteringOption
         std::sort(members.begin(), members.end());
         const double med = kept_median[by_f[k]];
         for (Index i : members) s.mode_of_pole(i) = k;
-        // A cluster most of whose poles couple to the noise directions is a noise-coupled mode: its
-        // few poles under the limit are borderline, and their frozen sigma is not the mode's (the
-        // chain's 17 Hz mode where k* < the true order: one such pole, sigma 10x too small). Then
-        // the coupled poles count too, with the unfrozen sigma they carry.
+        // A cluster most of whose poles couple to the noise directions is read like one all of whose
+        // poles do: its few poles under the limit are borderline, and their frozen sigma is not the
+        // mode's (the chain's 17 Hz mode where k* < the true order: one such pole, sigma 10x too
+        // small). Then every pole is a candidate for the representative and the shape pole, and
+        // the coupled ones give their unfrozen sigma.
         const bool mostly_coupled =
             2 * std::count_if(members.begin(), members.end(), [&](Index i) { return bool(P.noise_coupled(i)); }) >
             std::ptrdiff_t(members.size());
@@ -663,15 +664,16 @@ inline SelectedModes select_modes(const Diagram& diagram, const ClusteringOption
             s.frequency_damping_correlation(k) = uf > 0.0 && uxi > 0.0 ? u.head(nb).dot(u.tail(nb)) / (uf * uxi) : nan;
         }
         if (options.order_discrepancy && sufficient != rep) {
-            // the two are one record's estimates, correlated: the combined sigma is an upper bound
-            // of their difference's, so the test fires only on a clear discrepancy
-            auto widen = [&](double& sigma, double difference, double other) {
-                if (!(std::abs(difference) > 1.96 * std::hypot(sigma, other))) return;  // NaN: not judged
+            // Judged on the two poles' own sigma: one record's orders are positively correlated, so
+            // their combined sigma bounds their difference's from above and the test fires only on
+            // a clear discrepancy; the reported sigma (the cluster's) takes the difference in.
+            auto widen = [&](double& sigma, double difference, double own_rep, double own_low) {
+                if (!(std::abs(difference) > 1.96 * std::hypot(own_rep, own_low))) return;  // NaN: not judged
                 sigma = std::hypot(sigma, difference);
                 s.order_discrepancy(k) = true;
             };
-            widen(s.frequency_std(k), f(rep) - f(sufficient), P.frequency_std(sufficient));
-            widen(s.damping_std(k), xi(rep) - xi(sufficient), P.damping_std(sufficient));
+            widen(s.frequency_std(k), f(rep) - f(sufficient), P.frequency_std(rep), P.frequency_std(sufficient));
+            widen(s.damping_std(k), xi(rep) - xi(sufficient), P.damping_std(rep), P.damping_std(sufficient));
         }
         Index ref = 0;
         P.mode_shape.col(shape_rep).cwiseAbs().maxCoeff(&ref);

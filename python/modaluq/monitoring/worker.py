@@ -52,6 +52,12 @@ def settle_seconds() -> float:
     return value
 
 
+#: Settings added after monitoring stores were made, with the value that gives the behaviour from
+#: before them: a part's fingerprint leaves them out at that value (``--no-order-discrepancy``
+#: resumes a store made before 2026-11-27; docs/monitoring.md).
+ADDED_SETTINGS = {"clustering": {"order_discrepancy": False}}
+
+
 @dataclass(frozen=True)
 class TaskConfig:
     """The settings every record is run with (the part files remember them)."""
@@ -65,10 +71,15 @@ class TaskConfig:
     settle_seconds: float = SETTLE_SECONDS    #: a file modified more recently is still being written
 
     def fingerprint(self) -> dict:
-        """The settings that make a part (not where or how fast it runs)."""
+        """The settings that make a part (not where or how fast it runs). A setting added after
+        stores were made is left out at the value that gives the behaviour before it
+        (:data:`ADDED_SETTINGS`), so that those stores resume with it."""
+        clustering = self.clustering.to_dict()
+        for key, before in ADDED_SETTINGS["clustering"].items():
+            if clustering.get(key) == before:
+                del clustering[key]
         return {"modaluq": __version__, "settings": self.settings.to_dict(), "criteria": self.criteria.to_dict(),
-                "clustering": self.clustering.to_dict(), "read": jsonable(self.read),
-                "check_harmonics": self.check_harmonics}
+                "clustering": clustering, "read": jsonable(self.read), "check_harmonics": self.check_harmonics}
 
     def fingerprint_id(self) -> str:
         """A short hash of :meth:`fingerprint`, kept in every part: a part made with other settings is not used."""

@@ -67,12 +67,34 @@ def test_resume_runs_nothing_done_and_refuses_other_settings(campaign, tmp_path)
     # other settings: refused, naming what differs and how to start again
     with pytest.raises(ValueError, match=r"other settings \(settings\.orders differ\).*--no-resume"):
         monitor(campaign.records[:8], settings=SETTINGS.replace(orders=(2, 4, 6, 8)), out=out, progress=False)
-    # a clustering option counts, by its dotted name (a store made before order_discrepancy's default)
+    # a clustering option counts, by its dotted name
     with pytest.raises(ValueError, match=r"other settings \(clustering\.order_discrepancy differ\)"):
         monitor(campaign.records[:8], settings=SETTINGS, out=out, progress=False,
                 clustering=modaluq.ClusteringSettings(order_discrepancy=False))
     assert monitor(campaign.records[:8], settings=SETTINGS, out=out, progress=False, resume=False,
                    tracking=TrackingSettings(reference_records=4)).n_run == 8
+
+
+def test_a_store_made_before_a_setting_was_added_resumes_with_its_old_value(campaign, tmp_path):
+    """A store made before order_discrepancy existed: its parts' fingerprint has no such key. The
+    default (True) is refused by name; order_discrepancy=False (--no-order-discrepancy) is the
+    fingerprint it was made with, and its parts serve."""
+    from modaluq.monitoring.worker import ADDED_SETTINGS, TaskConfig
+
+    old = modaluq.ClusteringSettings(order_discrepancy=False)
+    fingerprint = TaskConfig(settings=SETTINGS, clustering=old).fingerprint()
+    assert set(ADDED_SETTINGS["clustering"]).isdisjoint(fingerprint["clustering"])  # as before the key
+    out = tmp_path / "t.nc"
+    tracking = TrackingSettings(reference_records=4)
+    first = monitor(campaign.records[:6], settings=SETTINGS, clustering=old, out=out, progress=False,
+                    tracking=tracking)
+    stamp = json.loads((tmp_path / "t.parts" / "settings.json").read_text())
+    assert "order_discrepancy" not in stamp["clustering"]
+    with pytest.raises(ValueError, match=r"clustering\.order_discrepancy differ"):
+        monitor(campaign.records[:6], settings=SETTINGS, out=out, progress=False, tracking=tracking)
+    again = monitor(campaign.records[:6], settings=SETTINGS, clustering=old, out=out, progress=False,
+                    tracking=tracking)
+    assert first.n_run == 6 and again.n_run == 0
 
 
 def test_a_store_without_parts_takes_other_settings(campaign, tmp_path):
