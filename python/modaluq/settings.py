@@ -446,15 +446,15 @@ class ClusteringSettings:
         ``"single"`` chains neighbouring poles, ``"complete"`` is stricter, ``"weighted"`` is WPGMA.
     cluster_std : {None, "median", "mean"}
         Which σ_f and σ_ξ each selected mode reports; the selected value is the representative
-        pole's either way. ``"median"``: the median of the σ of the cluster's reliable poles (not
-        at a close singular-value cut, not noise-coupled unless most of the cluster is), one order's σ. ``"mean"``: the σ of the
-        mean of those poles' estimates, ``‖(1/K) Σ_m u_m‖`` from each pole's first-order factor
-        rows (``Modes.frequency_damping_factor``; docs/uq-math.md §13.10), which the selected
-        value scatters like when the poles of one run decorrelate across orders; the median
-        where the poles carry no factor rows. None (default): the identification's own,
+        pole's either way. ``"median"``: the median of the σ of the cluster's reliable poles (not at
+        a close singular-value cut, not noise-coupled unless most of the cluster is), one order's σ.
+        ``"mean"``: the σ of the mean of those poles' estimates, ``‖(1/K) Σ_m u_m‖`` from each
+        pole's first-order factor rows (``Modes.frequency_damping_factor``; docs/uq-math.md §13.10),
+        which the selected value scatters like when the poles of one run decorrelate across orders;
+        the median where the poles carry no factor rows. None (default): the identification's own,
         ``"mean"`` for a multi-setup merge (:func:`modaluq.identify_setups`, whose merged poles
-        decorrelate across orders: the median was 1.04–1.4× the scatter of the selected value,
-        issue 23) and ``"median"`` for one record (the core's default). The cluster tests
+        decorrelate across orders: the median was 1.04–1.4× the scatter of the selected value, issue
+        23) and ``"median"`` for one record (the core's default). The cluster tests
         (``max_frequency_std_per_bandwidth``, ``merge_fragments``) use the poles' own σ either way.
     representative : {"median", "lowest"}
         Which member of a cluster is the mode. ``"median"`` (default): the reliable member nearest

@@ -118,8 +118,8 @@ def add_analysis_options(p: argparse.ArgumentParser) -> None:
                         f"(docs/shapes.md) (default {k.shape_representative})")
     g.add_argument("--no-order-discrepancy", action="store_true",
                    help="do not widen a mode's std where its f or damping at the representative's order and at the "
-                        "lowest sufficient order differ by more than 1.96 of their combined std (the table marks such modes "
-                        "'widened'; docs/settings.md)")
+                        "lowest sufficient order differ by more than 1.96 of their combined std (the table marks "
+                        "such modes 'widened'; docs/settings.md)")
 
 
 def _given(args, names) -> dict:
