@@ -156,7 +156,7 @@ def diagram_to_xarray(diagram, selected=None, attrs: dict | None = None, geometr
         pole_vars["selected_order_discrepancy"] = (
             ("mode",), np.asarray(sel.order_discrepancy, np.int8),
             {"long_name": "the std of f or xi includes the difference between the representative and the lowest "
-                          "sufficient order, which exceeded 1.96 std"})
+                          "sufficient order, which exceeded 1.96 of the two poles' combined std"})
         for name, values in (("mode_shape_real", sel.mode_shape.real), ("mode_shape_imag", sel.mode_shape.imag),
                              ("mode_shape_std_real", sel.mode_shape_std_real),
                              ("mode_shape_std_imag", sel.mode_shape_std_imag),
@@ -220,7 +220,8 @@ def report(diagram, selected, *, stamp: dict | None = None, extra: dict | None =
                                      "may be noise, not a mode",
                     "order_discrepancy": "the std of f or xi includes the difference between the mode at its "
                                          "representative's order and at its lowest sufficient order, which "
-                                         "exceeded 1.96 std: the estimate moves with the model order",
+                                         "exceeded 1.96 of the two poles' combined std: the estimate moves with "
+                                         "the model order",
                     "low_signal_to_noise": "H is within 3 std of its estimation noise: the modes cannot be told "
                                            "from noise",
                     "mpc": "modal phase collinearity (1: real shape), std to second order",

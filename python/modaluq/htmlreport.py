@@ -340,7 +340,7 @@ def write_html_report(path, diagram, selected, *, geometry=None, spectrum=None, 
              f"<p class='note'>σ: analytic (delta-method) standard deviation, {selected.std_words}; spread: "
              "standard deviation across the cluster's poles. noise?: every pole of the mode is noise-coupled. "
              "widened: f or ξ at the representative's order and at the lowest sufficient order differ by more "
-             "than 1.96 σ, and σ includes that difference.</p>"]
+             "than 1.96 of the two poles' combined σ, and σ includes that difference.</p>"]
     if selected.n_modes > 1:
         parts.append("<h2>MAC matrix</h2>" + div(_mac_figure(go, selected)))
     if selected.n_modes:

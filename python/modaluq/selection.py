@@ -211,8 +211,8 @@ class SelectedModes:
                             "first-order std): noise, or a mode too weak to tell from it (docs/settings.md)")
     #: the legend line below a table that marks modes whose σ the model order widened
     ORDER_DISCREPANCY_LEGEND = ("widened: f or xi at the representative's order and at the lowest sufficient "
-                                "order differ by more than 1.96 std; the std includes that difference "
-                                "(order_discrepancy, docs/settings.md)")
+                                "order differ by more than 1.96 of the two poles' combined std; the std includes "
+                                "that difference (order_discrepancy, docs/settings.md)")
 
     def __post_init__(self):
         # one flag per mode; unknown (a SelectedModes made by hand without it): none flagged
