@@ -108,8 +108,8 @@ def tables(data) -> dict:
                 if len(rows) < 3:
                     continue
                 if v.startswith("√"):
-                    a = np.array([(r["default"][0], *spread_candidate(r)[:1], r["default"][2],
-                                   spread_candidate(r)[1]) for r in rows])
+                    a = np.array([(r["default"][0], sf, r["default"][2], sxi)
+                                  for r in rows for sf, sxi in [spread_candidate(r)]])
                 else:
                     a = np.array([r[v] for r in rows])
                 table.setdefault(v, []).append((_cells(a[:, 0], a[:, 1]), _cells(a[:, 2], a[:, 3])))

@@ -20,6 +20,7 @@ from .auto_settings import capped_lag_warning, choose_settings, fewest_blocks, l
 from .checks import (
     as_samples,
     check_cost,
+    check_instance,
     check_sampling_frequency,
     constant_channel_warning,
     constant_channels,
@@ -349,10 +350,10 @@ def identify_setups(setups, *, fs=None, references: Sequence[str] | None = None,
         given = " and ".join(n for n, v in (("criteria", criteria), ("clustering", clustering)) if v is not None)
         raise ValueError(f"{given}: only with method='poser' (each setup's modes are selected before the merge); "
                          "the modular merge returns a Result: give them to its select_modes(criteria, settings)")
-    if criteria is not None and not isinstance(criteria, StabilityCriteria):
-        raise TypeError(f"criteria must be a StabilityCriteria; got {type(criteria).__name__}")
-    if clustering is not None and not isinstance(clustering, ClusteringSettings):
-        raise TypeError(f"clustering must be a ClusteringSettings; got {type(clustering).__name__}")
+    if criteria is not None:
+        check_instance("criteria", criteria, StabilityCriteria)
+    if clustering is not None:
+        check_instance("clustering", clustering, ClusteringSettings)
     if isinstance(setups, (str, os.PathLike)) and str(setups).lower().endswith(".toml"):
         setups = load_campaign(setups)
     base = campaign_settings(setups, settings) if isinstance(setups, Campaign) else settings

@@ -206,6 +206,10 @@ def _global_selected(merged, setup_modes, dof_names) -> SelectedModes:
     def per_mode(name, dtype):
         return np.array([getattr(s, name)[i] for s, i in zip(bsel, bi)], dtype=dtype)
 
+    def any_setup(name):  # a flag of a merged mode: set in any setup that has the mode
+        return np.array([any(bool(getattr(s, name)[int(idx[j, t])]) for j, s in enumerate(setup_modes)
+                             if idx[j, t] >= 0) for t in range(nm)], dtype=bool)
+
     sel = SelectedModes(
         frequency_hz=np.asarray(merged.frequency_hz), damping_ratio=np.asarray(merged.damping_ratio),
         mode_shape=np.asarray(merged.mode_shape),
@@ -224,10 +228,7 @@ def _global_selected(merged, setup_modes, dof_names) -> SelectedModes:
         members=tuple(np.zeros(0, np.int64) for _ in range(nm)), mode_of_pole=np.zeros(0, np.int64),
         dropped_frequency_hz=np.zeros(0), dropped_n_poles=np.zeros(0, np.int64), min_cluster_size=0,
         output_names=tuple(dof_names), has_uncertainty=has_unc,
-        block_too_short=np.array([any(bool(s.block_too_short[int(idx[j, t])]) for j, s in enumerate(setup_modes)
-                                      if idx[j, t] >= 0) for t in range(nm)], dtype=bool),
-        order_discrepancy=np.array([any(bool(s.order_discrepancy[int(idx[j, t])]) for j, s in enumerate(setup_modes)
-                                        if idx[j, t] >= 0) for t in range(nm)], dtype=bool),
+        block_too_short=any_setup("block_too_short"), order_discrepancy=any_setup("order_discrepancy"),
         mode_covariance=covs)
     mpc, mpd = [], []
     for k in range(nm):

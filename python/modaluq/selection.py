@@ -216,14 +216,11 @@ class SelectedModes:
 
     def __post_init__(self):
         # one flag per mode; unknown (a SelectedModes made by hand without it): none flagged
-        flags = np.asarray(self.noise_coupled, bool)
-        if flags.shape != np.shape(self.frequency_hz):
-            flags = np.zeros(np.shape(self.frequency_hz), bool)
-        object.__setattr__(self, "noise_coupled", flags)
-        widened = np.asarray(self.order_discrepancy, bool)
-        if widened.shape != np.shape(self.frequency_hz):
-            widened = np.zeros(np.shape(self.frequency_hz), bool)
-        object.__setattr__(self, "order_discrepancy", widened)
+        for name in ("noise_coupled", "order_discrepancy"):
+            flags = np.asarray(getattr(self, name), bool)
+            if flags.shape != np.shape(self.frequency_hz):
+                flags = np.zeros(np.shape(self.frequency_hz), bool)
+            object.__setattr__(self, name, flags)
         # unknown (made by hand): the shape is the representative's
         if self.shape_pole is None:
             object.__setattr__(self, "shape_pole", np.asarray(self.representative_pole, np.int64))

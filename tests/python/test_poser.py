@@ -175,9 +175,9 @@ def test_selection_settings_are_refused_by_name_where_they_do_not_apply(campaign
         modaluq.identify_setups(_frames(campaign), clustering=modaluq.ClusteringSettings(), **args)
     with pytest.raises(ValueError, match="criteria: only with method='poser'"):
         modaluq.identify_setups(_frames(campaign), criteria=modaluq.StabilityCriteria(), **args)
-    with pytest.raises(TypeError, match="clustering must be a ClusteringSettings"):
+    with pytest.raises(TypeError, match="clustering must be a modaluq.ClusteringSettings"):
         modaluq.identify_setups(_frames(campaign), method="poser", clustering={"linkage": "single"}, **args)
-    with pytest.raises(TypeError, match="criteria must be a StabilityCriteria"):
+    with pytest.raises(TypeError, match="criteria must be a modaluq.StabilityCriteria"):
         modaluq.identify_setups(_frames(campaign), method="poser", criteria=0.01, **args)
 
 
