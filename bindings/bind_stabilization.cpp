@@ -30,7 +30,8 @@ void modaluq::python::bind_stabilization(py::module_& m) {
     py::enum_<DropReason>(m, "DropReason")
         .value("too_few_poles", DropReason::too_few_poles)
         .value("frequency_std_above_bandwidth", DropReason::frequency_std_above_bandwidth)
-        .value("twin", DropReason::twin);
+        .value("twin", DropReason::twin)
+        .value("noise_twin", DropReason::noise_twin);
 
     py::class_<StabilityCriteria>(m, "StabilityCriteria")
         .def(py::init<>())
@@ -107,6 +108,7 @@ void modaluq::python::bind_stabilization(py::module_& m) {
         .def_readwrite("representative", &ClusteringOptions::representative)
         .def_readwrite("shape_representative", &ClusteringOptions::shape_representative)
         .def_readwrite("order_discrepancy", &ClusteringOptions::order_discrepancy)
+        .def_readwrite("drop_noise_twins", &ClusteringOptions::drop_noise_twins)
         .def("validate", &ClusteringOptions::validate);
 
     py::class_<SelectedModes>(m, "SelectedModes")

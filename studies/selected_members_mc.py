@@ -1,8 +1,8 @@
 """Monte Carlo of the engineer's call with each selected mode's cluster kept: the members' orders,
 f, ξ, σ and noise-coupling flags, the noise floor k*, and the selected value and σ of four
 selections of the same identification (the default; ``order_discrepancy=False``, the σ before
-2026-11-27 but for the noise-coupled clusters' rule; ``cluster_std="mean"``;
-``representative="lowest"``), so that candidate σ for the selected modes can be compared after the
+2026-11-27 but for the noise-coupled clusters' rule; ``drop_noise_twins=False``, the selection
+before 2026-11-27; ``cluster_std="mean"``; ``representative="lowest"``), so that candidate σ for the selected modes can be compared after the
 run on the same records (issue 27, docs/validation.md (h)).
 
 Each table cell is median σ / σ_MC · coverage of ±1.96 σ around the Monte Carlo mean · RMS z, for
@@ -27,6 +27,7 @@ DURATION = 400.0
 #: structure: (modaluq.simulate keywords, seed offset)
 STRUCTURES = {"chain": ({}, 7000), "frame": (dict(n_dof=4, input_dofs=(0, 3)), 8000)}
 VARIANTS = {"default": None, "no order check": ClusteringSettings(order_discrepancy=False),
+            "no noise twins": ClusteringSettings(drop_noise_twins=False),
             "mean": ClusteringSettings(cluster_std="mean"), "lowest": ClusteringSettings(representative="lowest")}
 
 

@@ -92,6 +92,8 @@ COLUMNS = ("group", "record", "n_windows", "window", "t0_s", "t1_s", "half_s", "
 
 
 def _clustering(representative):
+    if representative == "no-noise-twins":  # the default but drop_noise_twins (before 2026-11-27)
+        return modaluq.ClusteringSettings(drop_noise_twins=False)
     if representative == "no-order-check":  # the default but order_discrepancy (before 2026-11-27)
         return modaluq.ClusteringSettings(order_discrepancy=False)
     if representative in ("shape-lowest", "shape-median"):
@@ -104,7 +106,8 @@ def pairs_of_record(name, data, levels=LEVELS, tolerance=0.02, representative="m
     windows; ``representative`` is ``ClusteringSettings.representative``, or "shape-lowest" /
     "shape-median" for the median representative with that ``shape_representative`` ("median" and
     "shape-lowest" are the default since 2026-11-27, "shape-median" the default before), or
-    "no-order-check" for the default with ``order_discrepancy=False``."""
+    "no-order-check" for the default with ``order_discrepancy=False``, "no-noise-twins" with
+    ``drop_noise_twins=False``."""
     group, read, band = RECORDS[name]
     y, fs = read(data)
     T = y.shape[0] / fs
@@ -241,7 +244,8 @@ if __name__ == "__main__":
     p.add_argument("--out", default=None, help="CSV of every pair")
     p.add_argument("--levels", type=int, nargs="+", default=list(LEVELS), help="numbers of windows (default 1 2 4 8)")
     p.add_argument("--tolerance", type=float, default=0.02, help="pairing: largest relative frequency difference")
-    p.add_argument("--representative", choices=("median", "lowest", "shape-lowest", "shape-median", "no-order-check"),
+    p.add_argument("--representative", choices=("median", "lowest", "shape-lowest", "shape-median", "no-order-check",
+                                                "no-noise-twins"),
                    default="median",
                    help="ClusteringSettings.representative of every analysis (default median, with the "
                         "default shape_representative='lowest'); shape-lowest / shape-median: the median "

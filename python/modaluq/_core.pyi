@@ -692,9 +692,12 @@ class DropReason:
       frequency_std_above_bandwidth
     
       twin
+    
+      noise_twin
     """
     __members__: typing.ClassVar[dict[str, DropReason]]
     frequency_std_above_bandwidth: typing.ClassVar[DropReason]
+    noise_twin: typing.ClassVar[DropReason]
     too_few_poles: typing.ClassVar[DropReason]
     twin: typing.ClassVar[DropReason]
     @typing.overload
@@ -972,6 +975,7 @@ class Diagram:
 class ClusteringOptions:
     cluster_std: ClusterStd
     drop_doublets: bool
+    drop_noise_twins: bool
     linkage: Linkage
     merge_fragments: bool
     order_discrepancy: bool

@@ -54,6 +54,9 @@ class DropReason(str, enum.Enum):
     FREQUENCY_STD_ABOVE_BANDWIDTH = "frequency_std_above_bandwidth"
     #: a twin of a kept mode (same shape, close in frequency, from higher orders): ``dropped_twin_*``
     TWIN = "twin"
+    #: a lightly damped twin born of the noise (``drop_noise_twins``: less than half as damped as a kept
+    #: mode, inside its half-power band, first seen above the noise floor): ``dropped_twin_*`` as for TWIN
+    NOISE_TWIN = "noise_twin"
 
     def __str__(self) -> str:
         return self.value
@@ -79,6 +82,12 @@ def dropped_reason_text(sel: "SelectedModes", k: int) -> str:
         return ("a twin of the %.4g Hz mode: same shape (MAC %.2f), %s away, from order %d (the mode from order %d)"
                 % (twin_f, sel.dropped_twin_mac[k], _percent(abs(f - twin_f) / twin_f),
                    sel.dropped_first_order[k], sel.order_min[twin]))
+    if code is DropReason.NOISE_TWIN:
+        f, twin_f = float(sel.dropped_frequency_hz[k]), float(sel.dropped_twin_frequency_hz[k])
+        return ("a lightly damped twin of the %.4g Hz mode born of the noise: less than half as damped, inside its "
+                "half-power band (%s away), from order %d above the noise floor (the mode from order %d)"
+                % (twin_f, _percent(abs(f - twin_f) / twin_f), sel.dropped_first_order[k],
+                   sel.order_min[int(sel.dropped_twin_mode[k])]))
     raise ValueError(f"dropped_code[{k}] is not a DropReason: {code!r}")
 
 
@@ -151,11 +160,11 @@ class SelectedModes:
     dropped_first_order: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     #: median σ_f / (f ξ) of each dropped cluster (NaN where not judged: no uncertainty or no limit)
     dropped_frequency_std_per_bandwidth: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    #: DropReason.TWIN: the mode (index from 0 into these arrays) the cluster is a twin of, else -1
+    #: DropReason.TWIN, NOISE_TWIN: the mode (index from 0 into these arrays) the cluster is a twin of, else -1
     dropped_twin_mode: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
-    #: DropReason.TWIN: that mode's median frequency over its cluster, Hz, else NaN
+    #: DropReason.TWIN, NOISE_TWIN: that mode's median frequency over its cluster, Hz, else NaN
     dropped_twin_frequency_hz: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    #: DropReason.TWIN: MAC between the two clusters' shapes, else NaN
+    #: DropReason.TWIN, NOISE_TWIN: MAC between the two clusters' shapes, else NaN
     dropped_twin_mac: np.ndarray = field(default_factory=lambda: np.zeros(0))
     #: the limit on σ_f / (f ξ) applied (NaN: no such test, or no uncertainty)
     max_frequency_std_per_bandwidth: float = float("nan")
@@ -320,6 +329,7 @@ class SelectedModes:
             too_small = self.dropped_code.count(DropReason.TOO_FEW_POLES)
             too_uncertain = self.dropped_code.count(DropReason.FREQUENCY_STD_ABOVE_BANDWIDTH)
             twins = self.dropped_code.count(DropReason.TWIN)
+            noise_twins = self.dropped_code.count(DropReason.NOISE_TWIN)
             parts = []
             if too_small:
                 parts.append(f"{too_small} with fewer than {self.min_cluster_size} poles")
@@ -327,6 +337,8 @@ class SelectedModes:
                 parts.append(f"{too_uncertain} whose frequency std exceeds the peak's half-power bandwidth")
             if twins:
                 parts.append(f"{twins} twin{'' if twins == 1 else 's'} of a selected mode")
+            if noise_twins:
+                parts.append(f"{noise_twins} lightly damped twin{'' if noise_twins == 1 else 's'} born of the noise")
             s += f"\n{self.dropped_n_poles.size} cluster(s) dropped: " + ", ".join(parts)
         return s
 

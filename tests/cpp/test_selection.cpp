@@ -464,6 +464,60 @@ TEST_CASE("selection: the later of two alike clusters a few per cent apart is dr
     CHECK(modaluq::select_modes(d, o).n_modes() == 3);
 }
 
+TEST_CASE("selection: a lightly damped cluster born above the noise floor in a mode's half-power band is dropped") {
+    // a mode at 10 Hz, xi 2 % (half-power band +-0.2 Hz), from order 2; from order 20 a cluster
+    // at 10.1 Hz, xi 0.4 %, of another shape (MAC 0.10: drop_doublets does not see it)
+    auto diagram = [](double f_twin, double xi_twin, Index first_twin) {
+        std::map<Index, std::vector<P>> by_order;
+        for (Index n = 2; n <= 40; n += 2) {
+            by_order[n] = {{10.0, 0.02, 0}};
+            if (n >= first_twin) by_order[n].push_back({f_twin, xi_twin, 1});
+        }
+        modaluq::Diagram d = all_stable(by_order);
+        d.poles.noise_floor_order = 12;
+        return d;
+    };
+    modaluq::ClusteringOptions o;
+    o.min_cluster_size = 5;
+    const modaluq::Diagram d = diagram(10.1, 0.004, 20);
+    const auto s = modaluq::select_modes(d, o);
+    REQUIRE(s.n_modes() == 1);
+    CHECK(s.frequency_hz(0) == doctest::Approx(10.0));
+    REQUIRE(s.dropped_reason.size() == 1);
+    CHECK(s.dropped_reason[0] == "a lightly damped twin of the 10 Hz mode born of the noise: less than half as "
+                                 "damped, inside its half-power band (1 % away), from order 20 above the noise "
+                                 "floor (the mode from order 2)");
+    CHECK(s.dropped_code[0] == modaluq::DropReason::noise_twin);
+    CHECK(std::string(modaluq::to_string(s.dropped_code[0])) == "noise_twin");
+    CHECK(s.dropped_twin_mode(0) == 0);
+    CHECK(s.dropped_twin_frequency_hz(0) == 10.0);
+    CHECK(s.dropped_twin_mac(0) ==
+          modaluq::detail::mac_pair(d.poles.mode_shape.col(0), d.poles.mode_shape.col(find(d, 20, 10.1))));
+    CHECK(s.dropped_first_order(0) == 20);
+    // each condition is needed: the switch, the noise floor below the twin's first order, a
+    // later first order, less damping, inside the band, the uncertainty (which gives k*)
+    auto kept = [&](const modaluq::Diagram& dd, const modaluq::ClusteringOptions& oo) {
+        return modaluq::select_modes(dd, oo).n_modes() == 2;
+    };
+    modaluq::ClusteringOptions off = o;
+    off.drop_noise_twins = false;
+    CHECK(kept(d, off));
+    modaluq::Diagram high_floor = d;
+    high_floor.poles.noise_floor_order = 20;  // born at k*, not above it
+    CHECK(kept(high_floor, o));
+    CHECK(kept(diagram(10.1, 0.004, 2), o));   // born with the mode
+    CHECK(kept(diagram(10.1, 0.03, 20), o));   // more damped
+    CHECK(kept(diagram(10.1, 0.011, 20), o));  // not less than half as damped (a close physical pair)
+    CHECK(kept(diagram(10.25, 0.004, 20), o)); // outside the band (0.25 Hz > 0.2 Hz)
+    modaluq::Diagram no_std = d;
+    no_std.poles.has_uncertainty = false;
+    CHECK(kept(no_std, o));
+    // it does not need drop_doublets
+    modaluq::ClusteringOptions no_doublets = o;
+    no_doublets.drop_doublets = false;
+    CHECK(modaluq::select_modes(d, no_doublets).n_modes() == 1);
+}
+
 TEST_CASE("selection: each mode carries its representative pole's f-xi correlation and block-length flag") {
     std::map<Index, std::vector<P>> by_order;
     for (Index n = 2; n <= 20; n += 2) by_order[n] = {{5.0 + 1e-4 * double(n), 0.02, 0}, {12.0, 0.01, 1}};

@@ -250,31 +250,45 @@ def _merge_fragments(clusters, diagram, thin, settings):
 
 
 def _drop_doublets(kept, diagram, settings, dropped):
-    """In order of (first order, -size, first pole): drop a cluster within doublet_window of an
-    earlier survivor whose median-nearest pole has MAC >= doublet_min_mac with its own."""
-    f = diagram.frequency_hz
+    """In order of (first order, -size, first pole), against each earlier survivor in turn:
+    drop_noise_twins drops a cluster born above the noise floor k*, later than the survivor,
+    less than half as damped and inside its half-power band |f - f_s| < f_s ξ_s (median f and ξ);
+    drop_doublets one within doublet_window whose median-nearest pole has MAC >= doublet_min_mac
+    with the survivor's."""
+    f, xi = diagram.frequency_hz, diagram.damping_ratio
+    k_star = diagram.noise_floor_order
+    noise_twins = settings.drop_noise_twins and diagram.has_uncertainty and k_star > 0
+    def mac_of(a, b):
+        return modal_assurance_criterion(diagram.mode_shape[:, a], diagram.mode_shape[:, b])[0, 0]
+
     items = []
     for m in kept:
         med = float(np.median(f[m]))
-        items.append((int(diagram.order[m].min()), -m.size, int(m[0]), med, m[np.argmin(np.abs(f[m] - med))], m))
+        items.append((int(diagram.order[m].min()), -m.size, int(m[0]), med, float(np.median(xi[m])),
+                      m[np.argmin(np.abs(f[m] - med))], m))
     items.sort(key=lambda t: t[:3])
     survivors, out = [], []
-    for first, neg_n, _, med, rep, m in items:
-        twin = None
-        for s_first, s_med, s_rep in survivors:
-            if abs(med - s_med) / max(med, s_med) > settings.doublet_window:
-                continue
-            mac = modal_assurance_criterion(diagram.mode_shape[:, rep], diagram.mode_shape[:, s_rep])[0, 0]
-            if mac >= settings.doublet_min_mac:
-                twin = (s_first, s_med, mac)
+    for first, neg_n, _, med, med_xi, rep, m in items:
+        reason = None
+        for s_first, s_med, s_xi, s_rep in survivors:
+            mac = mac_of(rep, s_rep)
+            if (noise_twins and first > k_star and first > s_first and med_xi < 0.5 * s_xi
+                    and abs(med - s_med) < s_med * s_xi):
+                reason = (f"a lightly damped twin of the {s_med:.4g} Hz mode born of the noise: less than half as "
+                          f"damped, inside its half-power band ({100 * abs(med - s_med) / s_med:.3g} % away), from order "
+                          f"{first} above the noise floor (the mode from order {s_first})")
                 break
-        if twin is None:
-            survivors.append((first, med, rep))
+            if not settings.drop_doublets or abs(med - s_med) / max(med, s_med) > settings.doublet_window:
+                continue
+            if mac >= settings.doublet_min_mac:
+                reason = (f"a twin of the {s_med:.4g} Hz mode: same shape (MAC {mac:.2f}), "
+                          f"{100 * abs(med - s_med) / s_med:.3g} % away, from order {first} (the mode from order {s_first})")
+                break
+        if reason is None:
+            survivors.append((first, med, med_xi, rep))
             out.append(m)
         else:
-            dropped.append((med, -neg_n, f"a twin of the {twin[1]:.4g} Hz mode: same shape (MAC {twin[2]:.2f}), "
-                                          f"{100 * abs(med - twin[1]) / twin[1]:.3g} % away, from order {first} "
-                                          f"(the mode from order {twin[0]})"))
+            dropped.append((med, -neg_n, reason))
     return out
 
 
@@ -356,7 +370,7 @@ def select_modes_reference(diagram: Diagram, settings: ClusteringSettings | None
         else:
             kept.append(members)
 
-    if settings.drop_doublets:
+    if settings.drop_doublets or settings.drop_noise_twins:
         kept = _drop_doublets(kept, diagram, settings, dropped)
     kept.sort(key=lambda m: float(np.median(f[m])))
     dropped.sort()

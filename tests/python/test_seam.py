@@ -32,14 +32,16 @@ def _tdms_path():
 def _cases():
     """name -> a function making a run Analysis (the simulated chain and the wind-turbine record).
     Each mode's shape is read at its representative (``shape_representative="median"``) and its σ
-    is the reliable poles' alone (``order_discrepancy=False``), as when the expected output was
+    is the reliable poles' alone (``order_discrepancy=False``), with no twin born of the noise
+    dropped (``drop_noise_twins=False``), as when the expected output was
     written: the words are compared; the default's extra "shapes:" line is tested in
     test_stabilization.py, its "widened" mark in test_stabilization_core.py and test_htmlreport.py."""
     import modaluq
     from modaluq import Analysis, Settings
 
     def clustering_of(**kw):
-        return modaluq.ClusteringSettings(**{"shape_representative": "median", "order_discrepancy": False, **kw})
+        return modaluq.ClusteringSettings(**{"shape_representative": "median", "order_discrepancy": False,
+                                             "drop_noise_twins": False, **kw})
 
     def chain(n_samples, seed, clustering=None, **settings):
         def make():
@@ -172,16 +174,42 @@ def test_python_words_each_dropped_cluster_as_the_core_does(name):
     for x in (sel.dropped_min_size, sel.dropped_first_order, sel.dropped_frequency_std_per_bandwidth,
               sel.dropped_twin_mode, sel.dropped_twin_frequency_hz, sel.dropped_twin_mac, sel.dropped_n_poles):
         assert len(x) == nd
-    twin = np.array([c is DropReason.TWIN for c in sel.dropped_code], bool)
+    twin = np.array([c in (DropReason.TWIN, DropReason.NOISE_TWIN) for c in sel.dropped_code], bool)
     assert np.all((sel.dropped_twin_mode >= 0) == twin) and np.all(np.isfinite(sel.dropped_twin_mac) == twin)
     too_few = np.array([c is DropReason.TOO_FEW_POLES for c in sel.dropped_code], bool)
     assert np.all((sel.dropped_n_poles < sel.dropped_min_size) == too_few)
+
+
+def _noise_twin_record():
+    """The engineer's call on a record with a lightly damped twin born of the noise beside its
+    17 Hz mode (test_stabilization_core.py)."""
+    import modaluq
+
+    if "noise twin" not in _RUNS:
+        sim = modaluq.simulate(20_000, seed=7250)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", modaluq.ModalUQWarning)
+            _RUNS["noise twin"] = modaluq.stabilization_diagram(modaluq.identify(sim.y, fs=sim.fs,
+                                                                                frequency_range=(1, 20)))
+    return _RUNS["noise twin"]
+
+
+def test_python_words_a_twin_born_of_the_noise_as_the_core_does():
+    from modaluq import _core
+    from modaluq.selection import DropReason, dropped_reason_text
+
+    d = _noise_twin_record()
+    sel = d.select_modes()
+    core = _core.select_modes(d.core_diagram, sel.settings.to_core())
+    assert [dropped_reason_text(sel, k) for k in range(len(sel.dropped_code))] == list(core.dropped_reason)
+    assert DropReason.NOISE_TWIN in sel.dropped_code
 
 
 def test_the_cases_hold_every_reason():
     from modaluq.selection import DropReason
 
     seen = {c for name in CASES if name != "turbine" or _tdms_path() for c in _run(name).selected.dropped_code}
+    seen |= set(_noise_twin_record().select_modes().dropped_code)
     assert seen == set(DropReason)
 
 

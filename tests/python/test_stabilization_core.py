@@ -33,6 +33,9 @@ def _records():
             modaluq.simulate(20_000, seed=7034).y, fs=50.0, frequency_range=(1, 20)),
         "chain output-only, order discrepancy": lambda: modaluq.identify(
             modaluq.simulate(20_000, seed=7170).y, fs=50.0, frequency_range=(1, 20)),
+        # and one where a lightly damped twin born above the noise floor sits in the 17 Hz mode's band
+        "chain output-only, noise twin": lambda: modaluq.identify(
+            modaluq.simulate(20_000, seed=7250).y, fs=50.0, frequency_range=(1, 20)),
         # a multi-setup merge: its selection reports the sigma of the cluster's mean by default
         "campaign, merged": lambda: modaluq.identify_setups(
             simulate_campaign(4, durations=(120.0, 140.0, 110.0, 130.0, 150.0, 120.0)).frames(), fs=25.0,
@@ -50,7 +53,8 @@ CLUSTERING = [{}, {"linkage": "single"}, {"linkage": "complete", "distance_thres
               {"max_frequency_std_per_bandwidth": None}, {"cluster_std": "mean"}, {"cluster_std": "median"},
               {"representative": "lowest"}, {"representative": "lowest", "cluster_std": "mean"},
               {"shape_representative": "median"}, {"shape_representative": "median", "cluster_std": "mean"},
-              {"order_discrepancy": False}, {"order_discrepancy": False, "cluster_std": "mean"}]
+              {"order_discrepancy": False}, {"order_discrepancy": False, "cluster_std": "mean"},
+              {"drop_noise_twins": False}, {"drop_doublets": False}, {"drop_doublets": False, "drop_noise_twins": False}]
 
 
 @pytest.fixture(scope="module")
@@ -150,6 +154,29 @@ def test_the_two_records_exercise_the_rules_they_are_here_for(results):
     pytest.importorskip("xarray")
     ds = d.to_xarray(sel)
     assert ds["selected_order_discrepancy"].values.tolist() == [int(x) for x in sel.order_discrepancy]
+
+
+def test_a_lightly_damped_twin_born_above_the_noise_floor_is_dropped(results):
+    """Record 7250 of studies/selected_members_mc.py: beside the 17 Hz mode (ξ about 2 %, from the
+    true order) a cluster at ξ 0.4 % from order 32 (k* 10), whose shape is not the mode's (MAC
+    below doublet_min_mac). Kept, it is the selected mode nearest 17.01 Hz, 10 σ off in ξ."""
+    d = modaluq.stabilization_diagram(results["chain output-only, noise twin"])
+    sel, off = d.select_modes(), d.select_modes(drop_noise_twins=False)
+    near = np.abs(off.frequency_hz - 17.01) < 0.2
+    assert near.sum() == 2
+    light = np.flatnonzero(near)[np.argmin(off.damping_ratio[near])]
+    assert off.damping_ratio[light] < 0.006 and off.order_min[light] > d.noise_floor_order
+    assert sel.n_modes == off.n_modes - 1
+    k = np.flatnonzero(np.abs(sel.frequency_hz - 17.01) < 0.2)
+    assert k.size == 1 and 0.015 < sel.damping_ratio[k[0]] < 0.03
+    reasons = [r for r in sel.dropped_reason if "born of the noise" in r]
+    assert len(reasons) == 1
+    k = sel.dropped_reason.index(reasons[0])
+    assert sel.dropped_code[k] is modaluq.selection.DropReason.NOISE_TWIN
+    assert sel.dropped_first_order[k] > d.noise_floor_order
+    assert abs(sel.dropped_twin_frequency_hz[k] - 17.01) < 0.2 and sel.dropped_twin_mac[k] < 0.8
+    assert "1 lightly damped twin born of the noise" in str(sel)
+    assert not any("born of the noise" in r for r in off.dropped_reason)
 
 
 def test_a_high_noise_floor_keeps_a_lower_representatives_shape_as_the_reference_does(results):

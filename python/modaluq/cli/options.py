@@ -120,6 +120,10 @@ def add_analysis_options(p: argparse.ArgumentParser) -> None:
                    help="do not widen a mode's std where its f or damping at the representative's order and at the "
                         "lowest sufficient order differ by more than 1.96 of their combined std (the table marks "
                         "such modes 'widened'; docs/settings.md)")
+    g.add_argument("--no-drop-noise-twins", action="store_true",
+                   help="keep a lightly damped cluster born above the noise floor inside the half-power band of a "
+                        "mode present from a lower order (dropped by default as a fit of the covariances' estimation "
+                        "error; docs/settings.md)")
 
 
 def _given(args, names) -> dict:
@@ -139,7 +143,8 @@ def analysis_settings(args) -> tuple:
         settings = Settings(**_given(args, SETTINGS_OPTIONS), **({"uncertainty": False} if args.no_uncertainty else {}))
         criteria = StabilityCriteria(**_given(args, CRITERIA_OPTIONS))
         clustering = ClusteringSettings(**_given(args, CLUSTERING_OPTIONS),
-                                        **({"order_discrepancy": False} if args.no_order_discrepancy else {}))
+                                        **({"order_discrepancy": False} if args.no_order_discrepancy else {}),
+                                        **({"drop_noise_twins": False} if args.no_drop_noise_twins else {}))
     except (TypeError, ValueError) as exc:  # "min_mac must be ..." -> "--min-mac must be ..."
         raise option_error(exc, options) from None
     return settings, criteria, clustering

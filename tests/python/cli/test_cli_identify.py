@@ -348,10 +348,12 @@ def test_bootstrap_draws_reaches_the_identification(small_csv):
     assert report["stamp"]["settings"]["identification"]["bootstrap_draws"] == 10
 
 
-def test_no_order_discrepancy_reaches_the_selection(small_csv):
+@pytest.mark.parametrize("option, key", [("--no-order-discrepancy", "order_discrepancy"),
+                                         ("--no-drop-noise-twins", "drop_noise_twins")])
+def test_a_clustering_switch_reaches_the_selection(small_csv, option, key):
     # docs/settings.md: the clustering option, recorded with the selected modes
     out = small_csv.parent / "modes.json"
-    assert main(["identify", str(small_csv), "--out", str(out), "--no-order-discrepancy", *FAST_ARGS]) == 0
-    assert json.loads(out.read_text())["clustering"]["clustering"]["order_discrepancy"] is False
+    assert main(["identify", str(small_csv), "--out", str(out), option, *FAST_ARGS]) == 0
+    assert json.loads(out.read_text())["clustering"]["clustering"][key] is False
     assert main(["identify", str(small_csv), "--out", str(out), "--overwrite", *FAST_ARGS]) == 0
-    assert json.loads(out.read_text())["clustering"]["clustering"]["order_discrepancy"] is True
+    assert json.loads(out.read_text())["clustering"]["clustering"][key] is True
