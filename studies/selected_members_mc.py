@@ -1,9 +1,10 @@
 """Monte Carlo of the engineer's call with each selected mode's cluster kept: the members' orders,
-f, ξ, σ and noise-coupling flags, the noise floor k*, and the selected value and σ of four
+f, ξ, σ and noise-coupling flags, the noise floor k*, and the selected value and σ of five
 selections of the same identification (the default; ``order_discrepancy=False``, the σ before
 2026-11-27 but for the noise-coupled clusters' rule; ``drop_noise_twins=False``, the selection
-before 2026-11-27; ``cluster_std="mean"``; ``representative="lowest"``), so that candidate σ for the selected modes can be compared after the
-run on the same records (issue 27, docs/validation.md (h)).
+before the twins born of the noise were dropped; ``cluster_std="mean"``;
+``representative="lowest"``), so that candidate σ for the selected modes can be compared after the
+run on the same records (issue 27, docs/validation.md (h), (i)).
 
 Each table cell is median σ / σ_MC · coverage of ±1.96 σ around the Monte Carlo mean · RMS z, for
 f and for ξ of each true mode; the last column counts the cells inside both bands (median
