@@ -76,18 +76,16 @@ def dropped_reason_text(sel: "SelectedModes", k: int) -> str:
     if code is DropReason.FREQUENCY_STD_ABOVE_BANDWIDTH:
         return ("frequency std %.3g x the half-power bandwidth f xi (more than %g)"
                 % (sel.dropped_frequency_std_per_bandwidth[k], sel.max_frequency_std_per_bandwidth))
-    if code is DropReason.TWIN:
+    if code in (DropReason.TWIN, DropReason.NOISE_TWIN):
         f, twin_f = float(sel.dropped_frequency_hz[k]), float(sel.dropped_twin_frequency_hz[k])
-        twin = int(sel.dropped_twin_mode[k])
-        return ("a twin of the %.4g Hz mode: same shape (MAC %.2f), %s away, from order %d (the mode from order %d)"
-                % (twin_f, sel.dropped_twin_mac[k], _percent(abs(f - twin_f) / twin_f),
-                   sel.dropped_first_order[k], sel.order_min[twin]))
-    if code is DropReason.NOISE_TWIN:
-        f, twin_f = float(sel.dropped_frequency_hz[k]), float(sel.dropped_twin_frequency_hz[k])
+        away, first, twin_first = (_percent(abs(f - twin_f) / twin_f), sel.dropped_first_order[k],
+                                   sel.order_min[int(sel.dropped_twin_mode[k])])
+        if code is DropReason.TWIN:
+            return ("a twin of the %.4g Hz mode: same shape (MAC %.2f), %s away, from order %d (the mode from order %d)"
+                    % (twin_f, sel.dropped_twin_mac[k], away, first, twin_first))
         return ("a lightly damped twin of the %.4g Hz mode born of the noise: less than half as damped, inside its "
                 "half-power band (%s away), from order %d above the noise floor (the mode from order %d)"
-                % (twin_f, _percent(abs(f - twin_f) / twin_f), sel.dropped_first_order[k],
-                   sel.order_min[int(sel.dropped_twin_mode[k])]))
+                % (twin_f, away, first, twin_first))
     raise ValueError(f"dropped_code[{k}] is not a DropReason: {code!r}")
 
 

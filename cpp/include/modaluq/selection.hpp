@@ -391,29 +391,29 @@ std::vector<std::vector<Index>> drop_doublets(std::vector<std::vector<Index>> ke
         bool noise_born = false;  // which rule: drop_noise_twins, else drop_doublets
         for (std::size_t k = 0; k < survivors.size(); ++k) {
             const Item& s = survivors[k];
+            const bool noise = noise_twins && it.first > P.noise_floor_order && it.first > s.first &&
+                               it.xi < 0.5 * s.xi && std::abs(it.f - s.f) < s.f * s.xi;
+            if (!noise && (!o.drop_doublets || std::abs(it.f - s.f) / std::max(it.f, s.f) > o.doublet_window))
+                continue;
             const double m = mac_pair(P.mode_shape.col(it.rep), P.mode_shape.col(s.rep));
-            if (noise_twins && it.first > P.noise_floor_order && it.first > s.first && it.xi < 0.5 * s.xi &&
-                std::abs(it.f - s.f) < s.f * s.xi) {
-                twin = &s; twin_mac = m; twin_at = k; noise_born = true;
+            if (noise || m >= o.doublet_min_mac) {
+                twin = &s; twin_mac = m; twin_at = k; noise_born = noise;
                 break;
             }
-            if (!o.drop_doublets || std::abs(it.f - s.f) / std::max(it.f, s.f) > o.doublet_window) continue;
-            if (m >= o.doublet_min_mac) { twin = &s; twin_mac = m; twin_at = k; break; }
         }
-        if (twin && noise_born) {
-            drop(DoubletDrop{it.f, it.n, it.first, it.at, twin_at, twin->f, twin->first, twin_mac, true,
-                             "a lightly damped twin of the " + format_number("%.4g", twin->f) +
+        if (twin) {
+            const std::string away = percent(std::abs(it.f - twin->f) / twin->f);
+            const std::string reason =
+                noise_born ? "a lightly damped twin of the " + format_number("%.4g", twin->f) +
                                  " Hz mode born of the noise: less than half as damped, inside its half-power band (" +
-                                 percent(std::abs(it.f - twin->f) / twin->f) + " away), from order " +
-                                 std::to_string(it.first) + " above the noise floor (the mode from order " +
-                                 std::to_string(twin->first) + ")"});
-        } else if (twin) {
-            drop(DoubletDrop{it.f, it.n, it.first, it.at, twin_at, twin->f, twin->first, twin_mac, false,
-                             "a twin of the " + format_number("%.4g", twin->f) + " Hz mode: same shape (MAC " +
-                                 format_number("%.2f", twin_mac) + "), " +
-                                 percent(std::abs(it.f - twin->f) / twin->f) + " away, from order " +
-                                 std::to_string(it.first) + " (the mode from order " +
-                                 std::to_string(twin->first) + ")"});
+                                 away + " away), from order " + std::to_string(it.first) +
+                                 " above the noise floor (the mode from order " + std::to_string(twin->first) + ")"
+                           : "a twin of the " + format_number("%.4g", twin->f) + " Hz mode: same shape (MAC " +
+                                 format_number("%.2f", twin_mac) + "), " + away + " away, from order " +
+                                 std::to_string(it.first) + " (the mode from order " + std::to_string(twin->first) +
+                                 ")";
+            drop(DoubletDrop{it.f, it.n, it.first, it.at, twin_at, twin->f, twin->first, twin_mac, noise_born,
+                             reason});
         } else {
             survivors.push_back(it);
             out.push_back(std::move(kept[it.at]));
