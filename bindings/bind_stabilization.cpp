@@ -109,6 +109,7 @@ void modaluq::python::bind_stabilization(py::module_& m) {
         .def_readwrite("shape_representative", &ClusteringOptions::shape_representative)
         .def_readwrite("order_discrepancy", &ClusteringOptions::order_discrepancy)
         .def_readwrite("drop_noise_twins", &ClusteringOptions::drop_noise_twins)
+        .def_readwrite("reassign_borrowed_poles", &ClusteringOptions::reassign_borrowed_poles)
         .def("validate", &ClusteringOptions::validate);
 
     py::class_<SelectedModes>(m, "SelectedModes")

@@ -1,10 +1,12 @@
 """Monte Carlo of the engineer's call with each selected mode's cluster kept: the members' orders,
-f, ξ, σ and noise-coupling flags, the noise floor k*, and the selected value and σ of five
+f, ξ, σ and noise-coupling flags, the noise floor k*, and the selected value and σ of six
 selections of the same identification (the default; ``order_discrepancy=False``, the σ before
 2026-11-27 but for the noise-coupled clusters' rule; ``drop_noise_twins=False``, the selection
-before the twins born of the noise were dropped; ``cluster_std="mean"``;
-``representative="lowest"``), so that candidate σ for the selected modes can be compared after the
-run on the same records (issue 27, docs/validation.md (h), (i)).
+before the twins born of the noise were dropped; ``reassign_borrowed_poles=False``, the selection
+before 2026-11-28; ``cluster_std="mean"``; ``representative="lowest"``), so that candidate σ for
+the selected modes can be compared after the run on the same records (issue 27, docs/validation.md
+(h), (i), (j)). The report also counts, per selection, the true modes found (a selected mode
+within 2 %) and the modes selected.
 
 Each table cell is median σ / σ_MC · coverage of ±1.96 σ around the Monte Carlo mean · RMS z, for
 f and for ξ of each true mode; the last column counts the cells inside both bands (median
@@ -29,6 +31,7 @@ DURATION = 400.0
 STRUCTURES = {"chain": ({}, 7000), "frame": (dict(n_dof=4, input_dofs=(0, 3)), 8000)}
 VARIANTS = {"default": None, "no order check": ClusteringSettings(order_discrepancy=False),
             "no noise twins": ClusteringSettings(drop_noise_twins=False),
+            "no pole reassign": ClusteringSettings(reassign_borrowed_poles=False),
             "mean": ClusteringSettings(cluster_std="mean"), "lowest": ClusteringSettings(representative="lowest")}
 
 
@@ -53,6 +56,7 @@ def _mode_rows(res, truth):
                                       coupled=d.noise_coupled[m], rep=int(sel.representative_pole[j]),
                                       rep_index=int(np.flatnonzero(m == sel.representative_pole[j])[0]))
         row["k_star"] = int(d.noise_floor_order)
+        row["n_selected"] = {v: sel.n_modes for v, sel in sels.items()}
         rows.append(row)
     return rows
 
@@ -133,6 +137,11 @@ def report(paths):
                 cov = min(c[i][1] for c in cells for i in (0, 1))
                 print(f"| {lab} | {fs} | {xs} | {inband}/{2 * len(cells)}, cov ≥ {cov:.2f} |")
         for name, recs in data["records"].items():
+            if all("n_selected" in r[0] for r in recs):  # pickles made before 2026-11-28 lack it
+                found = {v: [sum(v in r[m] for r in recs) for m in range(len(data["truth"]))] for v in VARIANTS}
+                print(f"{data['structure']} {name}: true modes found / modes selected per record, by selection: "
+                      + "; ".join(f"{v} {found[v]} / {np.mean([r[0]['n_selected'][v] for r in recs]):.2f}"
+                                  for v in VARIANTS))
             fired = np.mean([r[m]["widened"] for r in recs for m in range(len(r)) if "widened" in r[m]])
             print(f"{data['structure']} {name}: σ widened by the order (order_discrepancy) for {100 * fired:.1f} % "
                   "of the selected true modes")

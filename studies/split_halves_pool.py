@@ -94,6 +94,8 @@ COLUMNS = ("group", "record", "n_windows", "window", "t0_s", "t1_s", "half_s", "
 def _clustering(representative):
     if representative == "no-noise-twins":  # the default but drop_noise_twins (before 2026-11-27)
         return modaluq.ClusteringSettings(drop_noise_twins=False)
+    if representative == "no-pole-reassign":  # the default but reassign_borrowed_poles (before 2026-11-28)
+        return modaluq.ClusteringSettings(reassign_borrowed_poles=False)
     if representative == "no-order-check":  # the default but order_discrepancy (before 2026-11-27)
         return modaluq.ClusteringSettings(order_discrepancy=False)
     if representative in ("shape-lowest", "shape-median"):
@@ -107,7 +109,7 @@ def pairs_of_record(name, data, levels=LEVELS, tolerance=0.02, representative="m
     "shape-median" for the median representative with that ``shape_representative`` ("median" and
     "shape-lowest" are the default since 2026-11-27, "shape-median" the default before), or
     "no-order-check" for the default with ``order_discrepancy=False``, "no-noise-twins" with
-    ``drop_noise_twins=False``."""
+    ``drop_noise_twins=False``, "no-pole-reassign" with ``reassign_borrowed_poles=False``."""
     group, read, band = RECORDS[name]
     y, fs = read(data)
     T = y.shape[0] / fs
@@ -245,12 +247,13 @@ if __name__ == "__main__":
     p.add_argument("--levels", type=int, nargs="+", default=list(LEVELS), help="numbers of windows (default 1 2 4 8)")
     p.add_argument("--tolerance", type=float, default=0.02, help="pairing: largest relative frequency difference")
     p.add_argument("--representative", choices=("median", "lowest", "shape-lowest", "shape-median", "no-order-check",
-                                                "no-noise-twins"),
+                                                "no-noise-twins", "no-pole-reassign"),
                    default="median",
                    help="ClusteringSettings.representative of every analysis (default median, with the "
                         "default shape_representative='lowest'); shape-lowest / shape-median: the median "
                         "representative with that shape_representative (shape-median: the default before "
-                        "2026-11-27); no-order-check: the default with order_discrepancy=False")
+                        "2026-11-27); no-order-check, no-noise-twins, no-pole-reassign: the default with "
+                        "order_discrepancy, drop_noise_twins or reassign_borrowed_poles False")
     args = p.parse_args()
     main(args.data_dir, args.out, levels=tuple(args.levels), tolerance=args.tolerance,
          representative=args.representative)

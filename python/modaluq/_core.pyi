@@ -980,6 +980,7 @@ class ClusteringOptions:
     merge_fragments: bool
     order_discrepancy: bool
     per_cluster_min_size: bool
+    reassign_borrowed_poles: bool
     representative: Representative
     shape_representative: Representative
     def __init__(self) -> None:

@@ -452,6 +452,17 @@ class ClusteringSettings:
         is born at or below k*; where k* is far above the modes' order (the measured records'
         34–46) nothing is dropped. Needs the noise floor (uncertainty on). False: as before
         2026-11-27.
+    reassign_borrowed_poles : bool
+        Before ``drop_doublets`` (default True): of two alike clusters (within ``doublet_window``,
+        MAC ≥ ``doublet_min_mac``), the earlier one's poles at orders below the later one's first
+        order go to the later one when every one of them is nearer to its median frequency and its
+        median damping ratio. A lightly damped cluster fed by the noise can take a mode's
+        lowest-order poles and so be the earlier of the two; ``drop_doublets`` then kept it and
+        dropped the mode as its twin (the paper's chain, input/output: a 15.99 Hz, ξ 0.3 % cluster
+        holding the 15.81 Hz, ξ 2.0 % poles of orders 4–6, the 15.83 Hz mode from order 8 dropped;
+        docs/validation.md, issue 27 (j)). Only orders the other cluster lacks move, so each keeps
+        one pole per order; a cluster gives or takes once. Needs ``drop_doublets``. False: as
+        before 2026-11-28.
     statuses : tuple of PoleStatus
         Which poles are clustered (default only ``STABLE``).
     linkage : str
@@ -528,6 +539,7 @@ class ClusteringSettings:
     shape_representative: str = _CLUSTERING["shape_representative"]
     order_discrepancy: bool = _CLUSTERING["order_discrepancy"]
     drop_noise_twins: bool = _CLUSTERING["drop_noise_twins"]
+    reassign_borrowed_poles: bool = _CLUSTERING["reassign_borrowed_poles"]
 
     def __post_init__(self):
         check_real("distance_threshold", self.distance_threshold, low=0, low_open=True)
@@ -537,7 +549,7 @@ class ClusteringSettings:
         check_real("max_frequency_std_per_bandwidth", self.max_frequency_std_per_bandwidth, low=0, low_open=True,
               allow_none=True)
         for name in ("per_cluster_min_size", "merge_fragments", "drop_doublets", "order_discrepancy",
-                     "drop_noise_twins"):
+                     "drop_noise_twins", "reassign_borrowed_poles"):
             object.__setattr__(self, name, check_boolean(name, getattr(self, name)))  # a bool, as to_dict gives
         check_real("doublet_window", self.doublet_window, low=0)
         check_real("doublet_min_mac", self.doublet_min_mac, low=0, high=1)

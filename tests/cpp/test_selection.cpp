@@ -518,6 +518,71 @@ TEST_CASE("selection: a lightly damped cluster born above the noise floor in a m
     CHECK(modaluq::select_modes(d, no_doublets).n_modes() == 1);
 }
 
+TEST_CASE("selection: a mode's lowest poles taken by an alike cluster born later are given back") {
+    // the mode: 10 Hz, xi 2 %, shape 0; its poles of orders 2-6 (10.01 Hz, shape 3: MAC 0.88) fall
+    // into a lightly damped cluster at 10.15 Hz, xi 0.3 %, shape 3, from order 14, and the mode's
+    // own cluster starts at order 8
+    auto diagram = [](double lead_xi, int main_shape) {
+        std::map<Index, std::vector<P>> by_order;
+        for (Index n = 2; n <= 40; n += 2) {
+            if (n < 8) by_order[n] = {{10.01, lead_xi, main_shape}};
+            else by_order[n] = {{10.0, 0.02, 0}};
+            if (n >= 14) by_order[n].push_back({10.15, 0.003, main_shape});
+        }
+        modaluq::Diagram d = all_stable(by_order);
+        d.poles.noise_floor_order = 12;
+        return d;
+    };
+    modaluq::ClusteringOptions o;
+    o.min_cluster_size = 5;
+    const modaluq::Diagram d = diagram(0.02, 3);
+    auto s = modaluq::select_modes(d, o);
+    REQUIRE(s.n_modes() == 1);
+    CHECK(s.frequency_hz(0) == doctest::Approx(10.0));
+    CHECK(s.order_min(0) == 2);  // with the orders 2-6 given back
+    CHECK(s.n_poles(0) == 20);
+    REQUIRE(s.dropped_code.size() == 1);
+    CHECK(s.dropped_code[0] == modaluq::DropReason::noise_twin);  // now born at 14, above k* = 12
+    CHECK(s.dropped_first_order(0) == 14);
+    CHECK(s.dropped_n_poles(0) == 14);
+    CHECK(s.dropped_frequency_hz(0) == doctest::Approx(10.15));
+    // the same by drop_doublets alone
+    modaluq::ClusteringOptions no_noise = o;
+    no_noise.drop_noise_twins = false;
+    s = modaluq::select_modes(d, no_noise);
+    REQUIRE(s.n_modes() == 1);
+    CHECK(s.frequency_hz(0) == doctest::Approx(10.0));
+    REQUIRE(s.dropped_reason.size() == 1);
+    CHECK(s.dropped_reason[0] == "a twin of the 10 Hz mode: same shape (MAC 0.88), 1.5 % away, from order 14 "
+                                 "(the mode from order 2)");
+    // without the option the lightly damped cluster is the earlier one and the mode its twin
+    modaluq::ClusteringOptions off = o;
+    off.reassign_borrowed_poles = false;
+    s = modaluq::select_modes(d, off);
+    REQUIRE(s.n_modes() == 1);
+    CHECK(s.frequency_hz(0) == doctest::Approx(10.15));
+    CHECK(s.n_poles(0) == 17);
+    REQUIRE(s.dropped_code.size() == 1);
+    CHECK(s.dropped_code[0] == modaluq::DropReason::twin);
+    CHECK(s.dropped_frequency_hz(0) == doctest::Approx(10.0));
+    CHECK(s.dropped_first_order(0) == 8);
+    // each condition is needed: poles nearer in damping too (xi 0.2 % is the cluster's own), an
+    // alike shape (shape 1: MAC 0.10), drop_doublets
+    s = modaluq::select_modes(diagram(0.002, 3), o);
+    REQUIRE(s.n_modes() == 1);
+    CHECK(s.frequency_hz(0) == doctest::Approx(10.15));
+    s = modaluq::select_modes(diagram(0.02, 1), o);
+    REQUIRE(s.n_modes() == 2);
+    CHECK(s.order_min(0) == 8);
+    CHECK(s.n_poles(1) == 17);
+    modaluq::ClusteringOptions no_doublets = o;
+    no_doublets.drop_doublets = false;
+    s = modaluq::select_modes(d, no_doublets);
+    REQUIRE(s.n_modes() == 2);
+    CHECK(s.n_poles(0) == 17);  // 10 Hz: orders 8-40
+    CHECK(s.n_poles(1) == 17);  // 10.15 Hz: orders 2-6 and 14-40
+}
+
 TEST_CASE("selection: each mode carries its representative pole's f-xi correlation and block-length flag") {
     std::map<Index, std::vector<P>> by_order;
     for (Index n = 2; n <= 20; n += 2) by_order[n] = {{5.0 + 1e-4 * double(n), 0.02, 0}, {12.0, 0.01, 1}};

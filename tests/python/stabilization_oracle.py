@@ -249,6 +249,41 @@ def _merge_fragments(clusters, diagram, thin, settings):
     return clusters
 
 
+def _reassign_borrowed_poles(kept, diagram, settings):
+    """Of two alike clusters (doublet_window, MAC >= doublet_min_mac of their median-nearest poles),
+    the earlier one's poles below the later one's first order go to the later one when each is
+    nearer to its median f and median ξ; medians and first orders from before any move, givers
+    in order of (first order, index), each cluster giving or taking once, never all its poles."""
+    f, xi, order = diagram.frequency_hz, diagram.damping_ratio, diagram.order
+    info = []
+    for m in kept:
+        med = float(np.median(f[m]))
+        info.append((med, float(np.median(xi[m])), int(order[m].min()), m[np.argmin(np.abs(f[m] - med))]))
+    by_first = sorted(range(len(kept)), key=lambda k: (info[k][2], k))
+    kept = list(kept)
+    involved = set()
+    for b in by_first:
+        if b in involved:
+            continue
+        fb, xb, first_b, rep_b = info[b]
+        for a in by_first:
+            fa, xa, first_a, rep_a = info[a]
+            if a == b or a in involved or first_a <= first_b or abs(fa - fb) / max(fa, fb) > settings.doublet_window:
+                continue
+            mac = modal_assurance_criterion(diagram.mode_shape[:, rep_a], diagram.mode_shape[:, rep_b])[0, 0]
+            if mac < settings.doublet_min_mac:
+                continue
+            lead = kept[b][order[kept[b]] < first_a]
+            if lead.size == kept[b].size or not np.all((np.abs(f[lead] - fa) < np.abs(f[lead] - fb))
+                                                        & (np.abs(xi[lead] - xa) < np.abs(xi[lead] - xb))):
+                continue
+            kept[b] = kept[b][order[kept[b]] >= first_a]
+            kept[a] = np.sort(np.concatenate([kept[a], lead]))
+            involved |= {a, b}
+            break
+    return kept
+
+
 def _drop_doublets(kept, diagram, settings, dropped):
     """In order of (first order, -size, first pole), against each earlier survivor in turn:
     drop_noise_twins drops a cluster born above the noise floor k*, later than the survivor,
@@ -370,6 +405,8 @@ def select_modes_reference(diagram: Diagram, settings: ClusteringSettings | None
         else:
             kept.append(members)
 
+    if settings.drop_doublets and settings.reassign_borrowed_poles:
+        kept = _reassign_borrowed_poles(kept, diagram, settings)
     if settings.drop_doublets or settings.drop_noise_twins:
         kept = _drop_doublets(kept, diagram, settings, dropped)
     kept.sort(key=lambda m: float(np.median(f[m])))

@@ -36,6 +36,9 @@ def _records():
         # and one where a lightly damped twin born above the noise floor sits in the 17 Hz mode's band
         "chain output-only, noise twin": lambda: modaluq.identify(
             modaluq.simulate(20_000, seed=7250).y, fs=50.0, frequency_range=(1, 20)),
+        # input/output, where a lightly damped 16 Hz cluster holds the 15.8 Hz mode's poles of orders 4-6
+        "chain input/output, borrowed poles": lambda: modaluq.identify(
+            *(lambda s: (s.y, s.u))(modaluq.simulate(20_000, seed=5057)), fs=50.0, frequency_range=(1, 20)),
         # a multi-setup merge: its selection reports the sigma of the cluster's mean by default
         "campaign, merged": lambda: modaluq.identify_setups(
             simulate_campaign(4, durations=(120.0, 140.0, 110.0, 130.0, 150.0, 120.0)).frames(), fs=25.0,
@@ -54,7 +57,8 @@ CLUSTERING = [{}, {"linkage": "single"}, {"linkage": "complete", "distance_thres
               {"representative": "lowest"}, {"representative": "lowest", "cluster_std": "mean"},
               {"shape_representative": "median"}, {"shape_representative": "median", "cluster_std": "mean"},
               {"order_discrepancy": False}, {"order_discrepancy": False, "cluster_std": "mean"},
-              {"drop_noise_twins": False}, {"drop_doublets": False}, {"drop_doublets": False, "drop_noise_twins": False}]
+              {"drop_noise_twins": False}, {"drop_doublets": False}, {"drop_doublets": False, "drop_noise_twins": False},
+              {"reassign_borrowed_poles": False}, {"reassign_borrowed_poles": False, "drop_noise_twins": False}]
 
 
 @pytest.fixture(scope="module")
@@ -177,6 +181,25 @@ def test_a_lightly_damped_twin_born_above_the_noise_floor_is_dropped(results):
     assert abs(sel.dropped_twin_frequency_hz[k] - 17.01) < 0.2 and sel.dropped_twin_mac[k] < 0.8
     assert "1 lightly damped twin born of the noise" in str(sel)
     assert not any("born of the noise" in r for r in off.dropped_reason)
+
+
+def test_a_modes_lowest_poles_taken_by_a_lightly_damped_cluster_are_given_back(results):
+    """Record 57 of studies/indicators_mc.py (input/output): a 16 Hz cluster of ξ about 0.3 %, born
+    at order 14, holds the 15.81 Hz, ξ 2 % poles of orders 4-6, so it was the earlier of two alike
+    clusters and the 15.83 Hz mode (from order 8) was dropped as its twin."""
+    d = modaluq.stabilization_diagram(results["chain input/output, borrowed poles"])
+    sel, off = d.select_modes(), d.select_modes(reassign_borrowed_poles=False)
+    k_off = np.flatnonzero(np.abs(off.frequency_hz - 15.83) < 0.3)
+    assert k_off.size == 1 and off.damping_ratio[k_off[0]] < 0.005 and off.order_min[k_off[0]] < 8
+    k = np.flatnonzero(np.abs(sel.frequency_hz - 15.83) < 0.3)
+    assert k.size == 1 and abs(sel.frequency_hz[k[0]] - 15.83) < 0.02 and 0.015 < sel.damping_ratio[k[0]] < 0.025
+    # the given-back poles are the mode's lowest, at orders its own cluster lacked
+    low = sel.members[k[0]][d.order[sel.members[k[0]]] < 8]
+    assert low.size > 0 and np.all(np.abs(d.damping_ratio[low] - 0.02) < 0.003)
+    assert sel.order_min[k[0]] == d.order[low].min()
+    assert sel.n_modes == off.n_modes and np.allclose(np.delete(sel.frequency_hz, k), np.delete(off.frequency_hz, k_off))
+    twin = [i for i, f in enumerate(sel.dropped_frequency_hz) if abs(f - 16.0) < 0.1]
+    assert len(twin) == 1 and sel.dropped_first_order[twin[0]] > 8
 
 
 def test_a_high_noise_floor_keeps_a_lower_representatives_shape_as_the_reference_does(results):

@@ -83,11 +83,13 @@ def test_selected_members_mc(capsys, tmp_path):
     data = mod.run(3, "frame", out, duration=60.0)
     assert set(data["records"]) == {"OO", "IO"} and len(data["records"]["OO"]) == 3
     row = next(r for r in data["records"]["OO"][0] if "default" in r)
-    assert {"default", "no order check", "mean", "lowest", "members", "widened", "k_star"} <= set(row)
+    assert {"default", "no order check", "no pole reassign", "mean", "lowest", "members", "widened", "k_star",
+            "n_selected"} <= set(row)
     assert len(row["members"]["order"]) == len(row["members"]["coupled"]) > 0
     mod.report([str(out)])
     text = capsys.readouterr().out
     assert "| no order check |" in text and "σ widened by the order" in text
+    assert "true modes found / modes selected per record" in text and "no pole reassign [" in text
 
 
 @pytest.mark.slow

@@ -124,6 +124,11 @@ def add_analysis_options(p: argparse.ArgumentParser) -> None:
                    help="keep a lightly damped cluster born above the noise floor inside the half-power band of a "
                         "mode present from a lower order (dropped by default as a fit of the covariances' estimation "
                         "error; docs/settings.md)")
+    g.add_argument("--no-reassign-borrowed-poles", action="store_true",
+                   help="do not give the lowest-order poles of a cluster to an alike cluster born later when each "
+                        "is nearer to its median f and damping (done by default, before twins are dropped, so a "
+                        "lightly damped cluster that took a mode's first poles is not kept as the mode; "
+                        "docs/settings.md)")
 
 
 def _given(args, names) -> dict:
@@ -144,7 +149,9 @@ def analysis_settings(args) -> tuple:
         criteria = StabilityCriteria(**_given(args, CRITERIA_OPTIONS))
         clustering = ClusteringSettings(**_given(args, CLUSTERING_OPTIONS),
                                         **({"order_discrepancy": False} if args.no_order_discrepancy else {}),
-                                        **({"drop_noise_twins": False} if args.no_drop_noise_twins else {}))
+                                        **({"drop_noise_twins": False} if args.no_drop_noise_twins else {}),
+                                        **({"reassign_borrowed_poles": False} if args.no_reassign_borrowed_poles
+                                           else {}))
     except (TypeError, ValueError) as exc:  # "min_mac must be ..." -> "--min-mac must be ..."
         raise option_error(exc, options) from None
     return settings, criteria, clustering

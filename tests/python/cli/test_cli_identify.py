@@ -349,7 +349,8 @@ def test_bootstrap_draws_reaches_the_identification(small_csv):
 
 
 @pytest.mark.parametrize("option, key", [("--no-order-discrepancy", "order_discrepancy"),
-                                         ("--no-drop-noise-twins", "drop_noise_twins")])
+                                         ("--no-drop-noise-twins", "drop_noise_twins"),
+                                         ("--no-reassign-borrowed-poles", "reassign_borrowed_poles")])
 def test_a_clustering_switch_reaches_the_selection(small_csv, option, key):
     # docs/settings.md: the clustering option, recorded with the selected modes
     out = small_csv.parent / "modes.json"

@@ -76,12 +76,13 @@ def test_resume_runs_nothing_done_and_refuses_other_settings(campaign, tmp_path)
 
 
 def test_a_store_made_before_a_setting_was_added_resumes_with_its_old_value(campaign, tmp_path):
-    """A store made before order_discrepancy and drop_noise_twins existed: its parts' fingerprint
-    has no such keys. The defaults (True) are refused by name; both False (--no-order-discrepancy
-    --no-drop-noise-twins) is the fingerprint it was made with, and its parts serve."""
+    """A store made before order_discrepancy, drop_noise_twins and reassign_borrowed_poles existed:
+    its parts' fingerprint has no such keys. The defaults (True) are refused by name; all False
+    (--no-order-discrepancy --no-drop-noise-twins --no-reassign-borrowed-poles) is the fingerprint
+    it was made with, and its parts serve."""
     from modaluq.monitoring.worker import ADDED_SETTINGS, TaskConfig
 
-    old = modaluq.ClusteringSettings(order_discrepancy=False, drop_noise_twins=False)
+    old = modaluq.ClusteringSettings(order_discrepancy=False, drop_noise_twins=False, reassign_borrowed_poles=False)
     fingerprint = TaskConfig(settings=SETTINGS, clustering=old).fingerprint()
     assert set(ADDED_SETTINGS["clustering"]).isdisjoint(fingerprint["clustering"])  # as before the key
     out = tmp_path / "t.nc"
@@ -89,12 +90,15 @@ def test_a_store_made_before_a_setting_was_added_resumes_with_its_old_value(camp
     first = monitor(campaign.records[:6], settings=SETTINGS, clustering=old, out=out, progress=False,
                     tracking=tracking)
     stamp = json.loads((tmp_path / "t.parts" / "settings.json").read_text())
-    assert "order_discrepancy" not in stamp["clustering"] and "drop_noise_twins" not in stamp["clustering"]
+    assert set(ADDED_SETTINGS["clustering"]).isdisjoint(stamp["clustering"])
     with pytest.raises(ValueError, match=r"clustering\.order_discrepancy.*differ"):
         monitor(campaign.records[:6], settings=SETTINGS, out=out, progress=False, tracking=tracking)
-    with pytest.raises(ValueError, match=r"clustering\.drop_noise_twins differ"):
+    with pytest.raises(ValueError, match=r"clustering\.drop_noise_twins\b.*differ"):
         monitor(campaign.records[:6], settings=SETTINGS, out=out, progress=False, tracking=tracking,
                 clustering=modaluq.ClusteringSettings(order_discrepancy=False))
+    with pytest.raises(ValueError, match=r"clustering\.reassign_borrowed_poles differ"):
+        monitor(campaign.records[:6], settings=SETTINGS, out=out, progress=False, tracking=tracking,
+                clustering=modaluq.ClusteringSettings(order_discrepancy=False, drop_noise_twins=False))
     again = monitor(campaign.records[:6], settings=SETTINGS, clustering=old, out=out, progress=False,
                     tracking=tracking)
     assert first.n_run == 6 and again.n_run == 0
