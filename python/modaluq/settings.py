@@ -461,8 +461,9 @@ class ClusteringSettings:
         dropped the mode as its twin (the paper's chain, input/output: a 15.99 Hz, ξ 0.3 % cluster
         holding the 15.81 Hz, ξ 2.0 % poles of orders 4–6, the 15.83 Hz mode from order 8 dropped;
         docs/validation.md, issue 27 (j)). Only orders the other cluster lacks move, so each keeps
-        one pole per order; a cluster gives or takes once. Needs ``drop_doublets``. False: as
-        before 2026-11-28.
+        one pole per order; a cluster gives or takes once, and those that gave or took are judged
+        again by the size and bandwidth rules (one that gave all its poles is gone). Needs
+        ``drop_doublets``. False: as before 2026-11-28.
     statuses : tuple of PoleStatus
         Which poles are clustered (default only ``STABLE``).
     linkage : str

@@ -252,36 +252,36 @@ def _merge_fragments(clusters, diagram, thin, settings):
 def _reassign_borrowed_poles(kept, diagram, settings):
     """Of two alike clusters (doublet_window, MAC >= doublet_min_mac of their median-nearest poles),
     the earlier one's poles below the later one's first order go to the later one when each is
-    nearer to its median f and median ξ; medians and first orders from before any move, givers
-    in order of (first order, index), each cluster giving or taking once, never all its poles."""
+    nearer to its median f and median ξ; medians and first orders from before any move, clusters
+    in order of (first order, first pole), each giving or taking once. Returns the clusters (one
+    left empty if all its poles moved) and which gave or took."""
     f, xi, order = diagram.frequency_hz, diagram.damping_ratio, diagram.order
     info = []
     for m in kept:
         med = float(np.median(f[m]))
         info.append((med, float(np.median(xi[m])), int(order[m].min()), m[np.argmin(np.abs(f[m] - med))]))
-    by_first = sorted(range(len(kept)), key=lambda k: (info[k][2], k))
+    by_first = sorted(range(len(kept)), key=lambda k: (info[k][2], int(kept[k][0])))
     kept = list(kept)
-    involved = set()
+    involved = np.zeros(len(kept), dtype=bool)
     for b in by_first:
-        if b in involved:
+        if involved[b]:
             continue
         fb, xb, first_b, rep_b = info[b]
         for a in by_first:
             fa, xa, first_a, rep_a = info[a]
-            if a == b or a in involved or first_a <= first_b or abs(fa - fb) / max(fa, fb) > settings.doublet_window:
+            if a == b or involved[a] or first_a <= first_b or abs(fa - fb) / max(fa, fb) > settings.doublet_window:
                 continue
             mac = modal_assurance_criterion(diagram.mode_shape[:, rep_a], diagram.mode_shape[:, rep_b])[0, 0]
             if mac < settings.doublet_min_mac:
                 continue
             lead = kept[b][order[kept[b]] < first_a]
-            if lead.size == kept[b].size or not np.all((np.abs(f[lead] - fa) < np.abs(f[lead] - fb))
-                                                        & (np.abs(xi[lead] - xa) < np.abs(xi[lead] - xb))):
+            if not np.all((np.abs(f[lead] - fa) < np.abs(f[lead] - fb)) & (np.abs(xi[lead] - xa) < np.abs(xi[lead] - xb))):
                 continue
             kept[b] = kept[b][order[kept[b]] >= first_a]
             kept[a] = np.sort(np.concatenate([kept[a], lead]))
-            involved |= {a, b}
+            involved[[a, b]] = True
             break
-    return kept
+    return kept, involved
 
 
 def _drop_doublets(kept, diagram, settings, dropped):
@@ -387,14 +387,16 @@ def select_modes_reference(diagram: Diagram, settings: ClusteringSettings | None
     if settings.merge_fragments and diagram.has_uncertainty:
         clusters = _merge_fragments(clusters, diagram, thin, settings)
     kept, dropped = [], []
-    for members in clusters:
-        members = thin(members)
+    smallest = [smallest]
+
+    def judge(members):
+        """The size and bandwidth rules: True if kept, else the reason is in dropped."""
         need = min_size
         if settings.min_cluster_size is None and settings.per_cluster_min_size:
             first = int(order[members].min())
             need = max(3, int(math.ceil(settings.min_cluster_fraction * sum(1 for n in diagram.orders if n >= first)
                                         - 1e-9)))
-            smallest = min(smallest, need)
+            smallest[0] = min(smallest[0], need)
         if members.size < need:
             dropped.append((float(np.median(f[members])), members.size, f"{members.size} pole{'' if members.size == 1 else 's'}, fewer than {need}"))
         elif check_bandwidth and not std_per_bandwidth(members) <= settings.max_frequency_std_per_bandwidth:
@@ -403,10 +405,15 @@ def select_modes_reference(diagram: Diagram, settings: ClusteringSettings | None
                             f"frequency std {q:.3g} x the half-power bandwidth f xi (more than "
                             f"{settings.max_frequency_std_per_bandwidth:g})"))
         else:
-            kept.append(members)
+            return True
+        return False
 
+    kept = [m for m in map(thin, clusters) if judge(m)]
     if settings.drop_doublets and settings.reassign_borrowed_poles:
-        kept = _reassign_borrowed_poles(kept, diagram, settings)
+        # the clusters that gave or took are judged again; one that gave all its poles is gone
+        moved, involved = _reassign_borrowed_poles(kept, diagram, settings)
+        kept = [m for m, again in zip(moved, involved) if m.size and (not again or judge(m))]
+    smallest = smallest[0]
     if settings.drop_doublets or settings.drop_noise_twins:
         kept = _drop_doublets(kept, diagram, settings, dropped)
     kept.sort(key=lambda m: float(np.median(f[m])))

@@ -33,15 +33,16 @@ def _cases():
     """name -> a function making a run Analysis (the simulated chain and the wind-turbine record).
     Each mode's shape is read at its representative (``shape_representative="median"``) and its σ
     is the reliable poles' alone (``order_discrepancy=False``), with no twin born of the noise
-    dropped (``drop_noise_twins=False``), as when the expected output was
-    written: the words are compared; the default's extra "shapes:" line is tested in
+    dropped (``drop_noise_twins=False``) and no borrowed pole given back
+    (``reassign_borrowed_poles=False``), as when the expected output was written: the words are compared; the default's extra "shapes:" line is tested in
     test_stabilization.py, its "widened" mark in test_stabilization_core.py and test_htmlreport.py."""
     import modaluq
     from modaluq import Analysis, Settings
 
     def clustering_of(**kw):
         return modaluq.ClusteringSettings(**{"shape_representative": "median", "order_discrepancy": False,
-                                             "drop_noise_twins": False, **kw})
+                                             "drop_noise_twins": False, "reassign_borrowed_poles": False,
+                                             **kw})
 
     def chain(n_samples, seed, clustering=None, **settings):
         def make():

@@ -116,7 +116,8 @@ struct ClusteringOptions {
     /// 0.3 % cluster born at order 14, the mode from order 8); it is then the earlier of the two,
     /// and drop_doublets would keep it and drop the mode as its twin. The poles moved are of
     /// orders the other cluster lacks, so each keeps one pole per order; a cluster gives or takes
-    /// once. Needs drop_doublets.
+    /// once (ties: first order, then first pole); the clusters that gave or took are judged again
+    /// by the size and bandwidth rules (one that gave all its poles is gone). Needs drop_doublets.
     bool reassign_borrowed_poles = true;
     double doublet_window = 0.05;
     double doublet_min_mac = 0.8;
@@ -358,10 +359,13 @@ struct DoubletDrop {
 };
 
 /// ClusteringOptions::reassign_borrowed_poles on the kept clusters (each one pole per order, in
-/// ascending index, hence order): from medians and first orders computed before any move; the
-/// giving clusters taken in order of first order, then index, each with the receiving candidates in
-/// the same order. Returns whether any pole moved.
-inline bool reassign_borrowed_poles(std::vector<std::vector<Index>>& kept, const Poles& P, const ClusteringOptions& o) {
+/// ascending index, hence order), with medians and first orders from before any move; the
+/// clusters in order of first order, then first pole (as drop_doublets orders them), each giving
+/// to the first alike later cluster that takes all its poles below that cluster's first order;
+/// a cluster gives or takes once. A cluster all of whose poles move is left empty (it was a
+/// piece of the other). Returns which clusters gave or took.
+inline std::vector<bool> reassign_borrowed_poles(std::vector<std::vector<Index>>& kept, const Poles& P,
+                                                 const ClusteringOptions& o) {
     struct Info {
         double f, xi;
         Index first, rep;
@@ -383,10 +387,11 @@ inline bool reassign_borrowed_poles(std::vector<std::vector<Index>>& kept, const
     }
     std::vector<std::size_t> by_first(kept.size());
     for (std::size_t k = 0; k < by_first.size(); ++k) by_first[k] = k;
-    std::stable_sort(by_first.begin(), by_first.end(),
-                     [&](std::size_t a, std::size_t b) { return info[a].first < info[b].first; });
+    std::sort(by_first.begin(), by_first.end(), [&](std::size_t a, std::size_t b) {
+        if (info[a].first != info[b].first) return info[a].first < info[b].first;
+        return kept[a].front() < kept[b].front();
+    });
     std::vector<bool> involved(kept.size(), false);
-    bool moved = false;
     for (std::size_t b : by_first) {
         if (involved[b]) continue;
         const Info& B = info[b];
@@ -406,15 +411,15 @@ inline bool reassign_borrowed_poles(std::vector<std::vector<Index>>& kept, const
                 nearer = nearer && std::abs(fi - A.f) < std::abs(fi - B.f) && std::abs(xi - A.xi) < std::abs(xi - B.xi);
                 lead.push_back(i);
             }
-            if (!nearer || rest.empty()) continue;
+            if (!nearer) continue;
             kept[b] = std::move(rest);
             kept[a].insert(kept[a].end(), lead.begin(), lead.end());
             std::sort(kept[a].begin(), kept[a].end());
-            involved[a] = involved[b] = moved = true;
+            involved[a] = involved[b] = true;
             break;
         }
     }
-    return moved;
+    return involved;
 }
 
 /// ClusteringOptions::drop_doublets and drop_noise_twins on the kept clusters (each one pole per
@@ -606,8 +611,8 @@ inline SelectedModes select_modes(const Diagram& diagram, const ClusteringOption
     if (options.merge_fragments && P.has_uncertainty) clusters = detail::merge_fragments(clusters, P, thin, options);
     std::vector<Index> kept_need;    // per kept cluster, the minimum size that applied
     std::vector<double> kept_q;      // and its median sigma_f / (f xi) (NaN: not judged)
-    for (const std::vector<Index>& all : clusters) {
-        const std::vector<Index> one_per_order = thin(all);
+    // The size and bandwidth rules: kept, or dropped with the reason.
+    auto judge = [&](std::vector<Index> one_per_order) {
         const Index size = Index(one_per_order.size());
         Index first = P.order(one_per_order.front());
         for (Index i : one_per_order) first = std::min(first, P.order(i));
@@ -634,10 +639,28 @@ inline SelectedModes select_modes(const Diagram& diagram, const ClusteringOption
             kept_need.push_back(need);
             kept_q.push_back(q_reported);
         }
+    };
+    for (const std::vector<Index>& all : clusters) judge(thin(all));
+    // After poles moved, the clusters that gave or took are judged again (a giver may be too small now).
+    if (options.drop_doublets && options.reassign_borrowed_poles) {
+        const std::vector<bool> changed = detail::reassign_borrowed_poles(kept, P, options);
+        std::vector<std::vector<Index>> before = std::move(kept);
+        std::vector<Index> need_before = std::move(kept_need);
+        std::vector<double> q_before = std::move(kept_q);
+        kept.clear();
+        kept_need.clear();
+        kept_q.clear();
+        for (std::size_t k = 0; k < before.size(); ++k) {
+            if (before[k].empty()) continue;  // joined whole to the other cluster
+            if (changed[k]) {
+                judge(std::move(before[k]));
+            } else {
+                kept.push_back(std::move(before[k]));
+                kept_need.push_back(need_before[k]);
+                kept_q.push_back(q_before[k]);
+            }
+        }
     }
-    if (options.drop_doublets && options.reassign_borrowed_poles &&
-        detail::reassign_borrowed_poles(kept, P, options) && check_bandwidth)
-        for (std::size_t k = 0; k < kept.size(); ++k) kept_q[k] = std_per_bandwidth(kept[k]);
     if (options.drop_doublets || options.drop_noise_twins)
         kept = detail::drop_doublets(std::move(kept), P, options, [&](detail::DoubletDrop d) {
             dropped.push_back({d.f, d.n, std::move(d.reason), d.noise_born ? DropReason::noise_twin : DropReason::twin,
