@@ -249,6 +249,13 @@ def _merge_fragments(clusters, diagram, thin, settings):
     return clusters
 
 
+def _twin_view(m, diagram):
+    """(median f, median ξ, first order, the pole nearest the median f) of a kept cluster, as the twin rules read it."""
+    f = diagram.frequency_hz
+    med = float(np.median(f[m]))
+    return med, float(np.median(diagram.damping_ratio[m])), int(diagram.order[m].min()), m[np.argmin(np.abs(f[m] - med))]
+
+
 def _reassign_borrowed_poles(kept, diagram, settings):
     """Of two alike clusters (doublet_window, MAC >= doublet_min_mac of their median-nearest poles),
     the earlier one's poles below the later one's first order go to the later one when each is
@@ -256,10 +263,7 @@ def _reassign_borrowed_poles(kept, diagram, settings):
     in order of (first order, first pole), each giving or taking once. Returns the clusters (one
     left empty if all its poles moved) and which gave or took."""
     f, xi, order = diagram.frequency_hz, diagram.damping_ratio, diagram.order
-    info = []
-    for m in kept:
-        med = float(np.median(f[m]))
-        info.append((med, float(np.median(xi[m])), int(order[m].min()), m[np.argmin(np.abs(f[m] - med))]))
+    info = [_twin_view(m, diagram) for m in kept]
     by_first = sorted(range(len(kept)), key=lambda k: (info[k][2], int(kept[k][0])))
     kept = list(kept)
     involved = np.zeros(len(kept), dtype=bool)
@@ -290,7 +294,6 @@ def _drop_doublets(kept, diagram, settings, dropped):
     less than half as damped and inside its half-power band |f - f_s| < f_s ξ_s (median f and ξ);
     drop_doublets one within doublet_window whose median-nearest pole has MAC >= doublet_min_mac
     with the survivor's."""
-    f, xi = diagram.frequency_hz, diagram.damping_ratio
     k_star = diagram.noise_floor_order
     noise_twins = settings.drop_noise_twins and diagram.has_uncertainty and k_star > 0
     def mac_of(a, b):
@@ -298,9 +301,8 @@ def _drop_doublets(kept, diagram, settings, dropped):
 
     items = []
     for m in kept:
-        med = float(np.median(f[m]))
-        items.append((int(diagram.order[m].min()), -m.size, int(m[0]), med, float(np.median(xi[m])),
-                      m[np.argmin(np.abs(f[m] - med))], m))
+        med, med_xi, first, rep = _twin_view(m, diagram)
+        items.append((first, -m.size, int(m[0]), med, med_xi, rep, m))
     items.sort(key=lambda t: t[:3])
     survivors, out = [], []
     for first, neg_n, _, med, med_xi, rep, m in items:

@@ -34,8 +34,9 @@ def _cases():
     Each mode's shape is read at its representative (``shape_representative="median"``) and its σ
     is the reliable poles' alone (``order_discrepancy=False``), with no twin born of the noise
     dropped (``drop_noise_twins=False``) and no borrowed pole given back
-    (``reassign_borrowed_poles=False``), as when the expected output was written: the words are compared; the default's extra "shapes:" line is tested in
-    test_stabilization.py, its "widened" mark in test_stabilization_core.py and test_htmlreport.py."""
+    (``reassign_borrowed_poles=False``), as when the expected output was written: the words are
+    compared; the default's extra "shapes:" line is tested in test_stabilization.py, its "widened"
+    mark in test_stabilization_core.py and test_htmlreport.py."""
     import modaluq
     from modaluq import Analysis, Settings
 

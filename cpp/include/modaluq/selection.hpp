@@ -344,6 +344,28 @@ std::vector<std::vector<Index>> merge_fragments(std::vector<std::vector<Index>> 
     return clusters;
 }
 
+/// A kept cluster as the twin rules read it: its median frequency and damping ratio, first order,
+/// and the pole nearest to the median frequency (the first such in `members`) whose shape they compare.
+struct TwinView {
+    double f, xi;
+    Index first, rep;
+};
+
+inline TwinView twin_view(const std::vector<Index>& members, const Poles& P) {
+    std::vector<double> fv, xv;
+    Index first = P.order(members.front());
+    for (Index i : members) {
+        fv.push_back(P.frequency_hz(i));
+        xv.push_back(P.damping_ratio(i));
+        first = std::min(first, P.order(i));
+    }
+    const double f = median(fv);
+    Index rep = members.front();
+    for (Index i : members)
+        if (std::abs(P.frequency_hz(i) - f) < std::abs(P.frequency_hz(rep) - f)) rep = i;
+    return {f, median(xv), first, rep};
+}
+
 /// A cluster drop_doublets dropped: its median frequency, size and first order, its index in
 /// the clusters given (`at`), and the kept twin's index in the clusters returned, median
 /// frequency, first order and MAC.
@@ -366,25 +388,8 @@ struct DoubletDrop {
 /// piece of the other). Returns which clusters gave or took.
 inline std::vector<bool> reassign_borrowed_poles(std::vector<std::vector<Index>>& kept, const Poles& P,
                                                  const ClusteringOptions& o) {
-    struct Info {
-        double f, xi;
-        Index first, rep;
-    };
-    std::vector<Info> info;
-    for (const auto& m : kept) {
-        std::vector<double> fv, xv;
-        Index first = P.order(m.front());
-        for (Index i : m) {
-            fv.push_back(P.frequency_hz(i));
-            xv.push_back(P.damping_ratio(i));
-            first = std::min(first, P.order(i));
-        }
-        const double f = median(fv);
-        Index rep = m.front();  // the pole nearest to the median frequency, as drop_doublets reads it
-        for (Index i : m)
-            if (std::abs(P.frequency_hz(i) - f) < std::abs(P.frequency_hz(rep) - f)) rep = i;
-        info.push_back({f, median(xv), first, rep});
-    }
+    std::vector<TwinView> info;
+    for (const auto& m : kept) info.push_back(twin_view(m, P));
     std::vector<std::size_t> by_first(kept.size());
     for (std::size_t k = 0; k < by_first.size(); ++k) by_first[k] = k;
     std::sort(by_first.begin(), by_first.end(), [&](std::size_t a, std::size_t b) {
@@ -394,9 +399,9 @@ inline std::vector<bool> reassign_borrowed_poles(std::vector<std::vector<Index>>
     std::vector<bool> involved(kept.size(), false);
     for (std::size_t b : by_first) {
         if (involved[b]) continue;
-        const Info& B = info[b];
+        const TwinView& B = info[b];
         for (std::size_t a : by_first) {
-            const Info& A = info[a];
+            const TwinView& A = info[a];
             if (a == b || involved[a] || A.first <= B.first) continue;
             if (std::abs(A.f - B.f) / std::max(A.f, B.f) > o.doublet_window) continue;
             if (mac_pair(P.mode_shape.col(A.rep), P.mode_shape.col(B.rep)) < o.doublet_min_mac) continue;
@@ -430,26 +435,12 @@ inline std::vector<bool> reassign_borrowed_poles(std::vector<std::vector<Index>>
 template <class Drop>
 std::vector<std::vector<Index>> drop_doublets(std::vector<std::vector<Index>> kept, const Poles& P,
                                               const ClusteringOptions& o, const Drop& drop) {
-    struct Item {
-        double f, xi;
-        Index first, n, rep;
+    struct Item : TwinView {
+        Index n;
         std::size_t at;
     };
     std::vector<Item> items;
-    for (std::size_t k = 0; k < kept.size(); ++k) {
-        std::vector<double> fv, xv;
-        Index first = P.order(kept[k].front());
-        for (Index i : kept[k]) {
-            fv.push_back(P.frequency_hz(i));
-            xv.push_back(P.damping_ratio(i));
-            first = std::min(first, P.order(i));
-        }
-        const double f = median(fv);
-        Index rep = kept[k].front();
-        for (Index i : kept[k])
-            if (std::abs(P.frequency_hz(i) - f) < std::abs(P.frequency_hz(rep) - f)) rep = i;
-        items.push_back({f, median(xv), first, Index(kept[k].size()), rep, k});
-    }
+    for (std::size_t k = 0; k < kept.size(); ++k) items.push_back({twin_view(kept[k], P), Index(kept[k].size()), k});
     // drop_noise_twins needs the noise floor, which the uncertainty propagation estimates
     const bool noise_twins = o.drop_noise_twins && P.has_uncertainty && P.noise_floor_order > 0;
     std::sort(items.begin(), items.end(), [&](const Item& a, const Item& b) {
