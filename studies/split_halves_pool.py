@@ -25,11 +25,13 @@ rotor's speed, not with σ. The measured pool is given with and without them. ``
 RMS of the second half's outputs over the first's (the largest over channels, ≥ 1): a diagnostic
 of stationarity, not a rule.
 
-The pairing truncates z_f: two frequencies more than the tolerance apart (2 %) are not paired,
-so a pair's |z_f| can be at most ``z_f_cap`` = tolerance·f / √(σ_f₁² + σ_f₂²), which is below 1.96 for
-short halves and broad modes. That biases RMS z_f down and the share within ±1.96 up. The tables
-therefore also give the pairs with ``z_f_cap`` >= 3 (a condition on σ, not on z), and
-``--tolerance`` reruns the pairing wider.
+A relative window alone truncates z_f: two frequencies more than the tolerance apart (2 %) are not
+paired, so a pair's |z_f| could be at most tolerance·f / √(σ_f₁² + σ_f₂²), which is below 1.96 for
+short halves and broad modes, biasing RMS z_f down and the share within ±1.96 up. Since
+2026-11-28 ``split_halves`` also pairs frequencies within ``pair_within_std`` (default 4) combined
+σ_f, so ``z_f_cap`` = max(tolerance·f / √(σ_f₁² + σ_f₂²), pair_within_std) is at least 4;
+``--pair-within-std 0`` gives the rule before. The tables also give the pairs with ``z_f_cap`` >= 3
+(a condition on σ, not on z), and ``--tolerance`` reruns the pairing wider.
 
 The shapes are checked alike (``z_mac``, ``mac_p_value``: the "same mode" test of the two halves'
 shapes with both shapes' covariances, ``modaluq.indicators.mac_test``): RMS z_MAC ≈ 1 and about
@@ -103,13 +105,13 @@ def _clustering(representative):
     return modaluq.ClusteringSettings(representative=representative)
 
 
-def pairs_of_record(name, data, levels=LEVELS, tolerance=0.02, representative="median"):
+def pairs_of_record(name, data, levels=LEVELS, tolerance=0.02, representative="median", pair_within_std=4.0):
     """Every mode pair of every window of one record (dicts with :data:`COLUMNS`), and the failed
     windows; ``representative`` is ``ClusteringSettings.representative``, or "shape-lowest" /
     "shape-median" for the median representative with that ``shape_representative`` ("median" and
     "shape-lowest" are the default since 2026-11-27, "shape-median" the default before), or
     "no-order-check" for the default with ``order_discrepancy=False``, "no-noise-twins" with
-    ``drop_noise_twins=False``, "no-pole-reassign" with ``reassign_borrowed_poles=False``."""
+    ``drop_noise_twins=False``, "no-pole-reassign" with ``reassign_borrowed_poles=False``; ``pair_within_std`` is ``split_halves``' (0: the 2 % window alone)."""
     group, read, band = RECORDS[name]
     y, fs = read(data)
     T = y.shape[0] / fs
@@ -120,7 +122,7 @@ def pairs_of_record(name, data, levels=LEVELS, tolerance=0.02, representative="m
             a = Analysis.from_arrays(y, fs=fs, settings=modaluq.Settings(frequency_range=band, start=t0, stop=t1),
                                      clustering=_clustering(representative))
             try:
-                check = split_halves(a, max_frequency_difference=tolerance)
+                check = split_halves(a, max_frequency_difference=tolerance, pair_within_std=pair_within_std)
             except ValueError as exc:
                 failed.append((name, n, k, str(exc).splitlines()[0]))
                 continue
@@ -139,7 +141,7 @@ def pairs_of_record(name, data, levels=LEVELS, tolerance=0.02, representative="m
                     orders=check.settings["orders"], f1_hz=f[m, 0], f2_hz=f[m, 1],
                     sigma_f1_hz=sf[m, 0], sigma_f2_hz=sf[m, 1], xi1=x[m, 0], xi2=x[m, 1],
                     sigma_xi1=sx[m, 0], sigma_xi2=sx[m, 1], z_f=check.z_frequency[m], z_xi=check.z_damping[m],
-                    z_f_cap=tolerance * f[m].max() / np.hypot(*sf[m]), mac=check.mac[m], z_mac=check.z_mac[m],
+                    z_f_cap=max(tolerance * f[m].max() / np.hypot(*sf[m]), pair_within_std), mac=check.mac[m], z_mac=check.z_mac[m],
                     mac_p_value=check.mac_p_value[m],
                     harmonic=bool(harmonic[m]), rms_ratio=ratio))
     return rows, failed
@@ -216,7 +218,7 @@ def print_tables(rows, failed, levels=LEVELS):
 
 
 def main(data_dir="../shared/data", out=None, records=tuple(RECORDS), levels=LEVELS, tolerance=0.02,
-         representative="median"):
+         representative="median", pair_within_std=4.0):
     """Run every record of ``records`` at every level of ``levels``, print the tables, write the
     pairs to ``out`` (CSV) if given; returns (rows, failed)."""
     data = Path(data_dir)
@@ -227,7 +229,7 @@ def main(data_dir="../shared/data", out=None, records=tuple(RECORDS), levels=LEV
         t = time.perf_counter()
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            r, f = pairs_of_record(name, data, levels, tolerance, representative)
+            r, f = pairs_of_record(name, data, levels, tolerance, representative, pair_within_std)
         rows += r
         failed += f
         print(f"{name}: {len(r)} pairs, {len(f)} failed windows, {time.perf_counter() - t:.1f} s", file=sys.stderr)
@@ -254,6 +256,9 @@ if __name__ == "__main__":
                         "representative with that shape_representative (shape-median: the default before "
                         "2026-11-27); no-order-check, no-noise-twins, no-pole-reassign: the default with "
                         "order_discrepancy, drop_noise_twins or reassign_borrowed_poles False")
+    p.add_argument("--pair-within-std", type=float, default=4.0,
+                   help="pairing: also pair frequencies within this many combined σ_f (default 4, the package's "
+                        "default since 2026-11-28; 0: the relative window alone, the rule before)")
     args = p.parse_args()
     main(args.data_dir, args.out, levels=tuple(args.levels), tolerance=args.tolerance,
-         representative=args.representative)
+         representative=args.representative, pair_within_std=args.pair_within_std)

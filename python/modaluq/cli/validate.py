@@ -20,7 +20,7 @@ from pathlib import Path
 
 from ..checks import MAX_THREADS
 from ..io import FORMATS
-from ..validation import monte_carlo
+from ..validation import monte_carlo, split_halves
 from .common import CliError, check_output_paths, integer_option, option_error, real_option
 
 __all__ = ["register", "run"]
@@ -55,7 +55,7 @@ def _file_names(orders) -> list:
 SIMULATION_ONLY = ("records", "samples", "unknown_input_std", "damping_ratio", "n_dof", "input_dofs", "output_dofs",
                    "seed", "processes", "noise_coupling_limit")
 RECORD_ONLY = ("fs", "format", "read_option", "inputs", "outputs", "frequency_range", "start", "stop",
-               "representative", "shape_representative")
+               "representative", "shape_representative", "pair_within_std")
 
 
 def _option(name: str) -> str:
@@ -66,7 +66,6 @@ def run_split_halves(args) -> int:
     """``modaluq validate --split-halves FILE``: the measured-record check of σ."""
     from ..analysis import Analysis
     from ..settings import ClusteringSettings, Settings
-    from ..validation import split_halves
     from .identify import parse_read_options
 
     bad = [_option(k) for k in SIMULATION_ONLY if getattr(args, k) is not None] + (
@@ -93,6 +92,8 @@ def run_split_halves(args) -> int:
                                       read_options=parse_read_options(args.read_option), outputs=args.outputs,
                                       inputs=args.inputs, settings=settings, clustering=clustering)
         kw = {} if args.tolerance is None else {"max_frequency_difference": args.tolerance}
+        if args.pair_within_std is not None:
+            kw["pair_within_std"] = args.pair_within_std
         if not args.no_progress:
             print(f"identifying the two halves of {args.split_halves} ...", file=sys.stderr)
         check = split_halves(analysis, **kw)
@@ -213,6 +214,7 @@ def register(subparsers) -> None:
         "against their sigma: z = (x1 - x2) / sqrt(s1^2 + s2^2); if sigma is right, RMS z is about 1 and 95 % "
         "of the z are within +-1.96. --block-rows, --past-block-rows, --n-blocks, --order (the diagram's orders) "
         "and --tolerance (the relative frequency difference that pairs two modes, default 0.02) apply too.")
+    within = inspect.signature(split_halves).parameters["pair_within_std"].default
     g.add_argument("--split-halves", metavar="FILE", default=None, help="the record (any format of modaluq identify)")
     g.add_argument("--fs", type=float, default=None, metavar="HZ",
                    help="sampling frequency in Hz (default: the file's)")
@@ -230,6 +232,9 @@ def register(subparsers) -> None:
                    help="which pole of each mode's cluster is compared, as for modaluq identify (default median)")
     g.add_argument("--shape-representative", choices=("median", "lowest"), default=None,
                    help="which pole gives each mode's shape, as for modaluq identify (default lowest)")
+    g.add_argument("--pair-within-std", type=real_option(0, low_open=False), default=None, metavar="K",
+                   help="also pair two modes whose frequencies differ by at most K combined sigma_f, so that the "
+                        f"relative window does not truncate z_f; 0: the window alone (default {within:g})")
     g.add_argument("--no-order-discrepancy", action="store_true",
                    help="do not widen a mode's std by the difference between its representative and its lowest "
                         "sufficient order, as for modaluq identify")

@@ -44,7 +44,8 @@ class SplitHalves:
 
     ``halves_s`` are the two windows in seconds of the record; ``settings`` the horizons, orders and
     blocks both halves were identified with; ``unmatched_hz`` the frequencies (Hz) of the modes
-    of each half without a partner.
+    of each half without a partner; ``pairing`` the rule that paired them
+    (``max_frequency_difference``, ``pair_within_std``, ``min_mac`` of :func:`split_halves`).
     """
 
     frequency_hz: np.ndarray        #: (n_pairs, 2), Hz
@@ -60,6 +61,7 @@ class SplitHalves:
     z_mac: np.ndarray = None
     #: (n_pairs,) p-value of the "same mode" test of the two shapes (NaN where not defined)
     mac_p_value: np.ndarray = None
+    pairing: dict = None
 
     def __post_init__(self):
         nan = np.full(len(self.mac), np.nan)
@@ -109,6 +111,7 @@ class SplitHalves:
         (a0, a1), (b0, b1) = self.halves_s
         lines = [f"## Split halves: {a0:g}-{a1:g} s against {b0:g}-{b1:g} s", "",
                  "Settings of both halves: " + ", ".join(f"{k} {v}" for k, v in self.settings.items()), "",
+                 *([self._pairing_line(), ""] if self.pairing else []),
                  "| f₁ (Hz) | f₂ (Hz) | σ_f₁, σ_f₂ (Hz) | z_f | ξ₁ (%) | ξ₂ (%) | σ_ξ₁, σ_ξ₂ (%) | z_ξ | MAC | z_MAC "
                  "| p (same mode) |",
                  "|---|---|---|---|---|---|---|---|---|---|---|"]
@@ -133,31 +136,47 @@ class SplitHalves:
         return "\n".join(lines) + "\n"
 
 
+    def _pairing_line(self) -> str:
+        p = self.pairing
+        within = (f" or by at most {p['pair_within_std']:g} combined σ_f" if p["pair_within_std"] > 0 else "")
+        return (f"Pairs: frequencies apart by at most {100 * p['max_frequency_difference']:g} %{within}, "
+                f"MAC ≥ {p['min_mac']:g}, nearest first, one to one.")
+
+
 def _z(values: np.ndarray, stds: np.ndarray) -> np.ndarray:
     with np.errstate(invalid="ignore", divide="ignore"):
         return (values[:, 0] - values[:, 1]) / np.sqrt(stds[:, 0] ** 2 + stds[:, 1] ** 2)
 
 
-def split_halves(analysis: Analysis, *, max_frequency_difference: float = 0.02, min_mac: float = 0.8) -> SplitHalves:
+def split_halves(analysis: Analysis, *, max_frequency_difference: float = 0.02, min_mac: float = 0.8,
+                 pair_within_std: float = 4.0) -> SplitHalves:
     """Identify the two halves of ``analysis``'s record (within its ``start``/``stop`` window) with
     the same settings, select the modes of each, pair them and compare (module docstring).
 
     The first half is identified as ``analysis`` says (automatic ``block_rows``, ``orders`` and
     ``n_blocks`` where not set, chosen for the half's length); the second with exactly the
     settings the first used. A mode of one half pairs with the mode of the other nearest in
-    frequency, one to one, when the two frequencies differ by at most
-    ``max_frequency_difference`` (a fraction) and their shapes have MAC ≥ ``min_mac``.
+    frequency, one to one, when their shapes have MAC ≥ ``min_mac`` and the two frequencies differ
+    by at most ``max_frequency_difference`` (a fraction) **or** by at most ``pair_within_std``
+    combined standard deviations √(σ_f₁² + σ_f₂²).
+
+    Why the second bound: a fixed relative window alone truncates z_f. Two estimates of a broad
+    mode from short halves, whose combined σ_f is above 1 % of f, could never give |z_f| > 2 and
+    would make σ look too large. With the default 4, a pair the σ say is one mode is never cut
+    off (|z| > 4 has probability 6·10⁻⁵); 0 pairs by ``max_frequency_difference`` alone.
 
     Raises
     ------
     ValueError
-        Settings without the uncertainty, a bad ``max_frequency_difference`` or ``min_mac``, or
+        Settings without the uncertainty, a bad ``max_frequency_difference``, ``min_mac`` or
+        ``pair_within_std``, or
         halves too short for the settings (the error names the half).
     """
     if not isinstance(analysis, Analysis):
         raise TypeError(f"analysis must be a modaluq.analysis.Analysis; got {type(analysis).__name__}")
     tol = check_real("max_frequency_difference", max_frequency_difference, low=0.0, low_open=True)
     min_mac = check_real("min_mac", min_mac, low=0.0, high=1.0)
+    within_std = check_real("pair_within_std", pair_within_std, low=0.0)
     if not analysis.settings.uncertainty:
         raise ValueError("split_halves compares the estimates against their σ: the settings must keep the uncertainty")
     t0 = analysis.settings.start or 0.0
@@ -175,7 +194,7 @@ def split_halves(analysis: Analysis, *, max_frequency_difference: float = 0.02, 
         except ValueError as exc:
             raise ValueError(f"half {k + 1} ({a:g}-{b:g} s): {exc}") from None
     s1, s2 = runs[0].selected, runs[1].selected
-    pairs = _pair(s1, s2, tol, min_mac)
+    pairs = _pair(s1, s2, tol, min_mac, within_std)
     i1 = np.array([p[0] for p in pairs], int)
     i2 = np.array([p[1] for p in pairs], int)
 
@@ -194,7 +213,8 @@ def split_halves(analysis: Analysis, *, max_frequency_difference: float = 0.02, 
             "orders": f"{min(used['orders'])}-{max(used['orders'])}"},
         unmatched_hz=(np.delete(np.asarray(s1.frequency_hz, float), i1),
                       np.delete(np.asarray(s2.frequency_hz, float), i2)),
-        z_mac=np.array([t[0] for t in tests], float), mac_p_value=np.array([t[1] for t in tests], float))
+        z_mac=np.array([t[0] for t in tests], float), mac_p_value=np.array([t[1] for t in tests], float),
+        pairing={"max_frequency_difference": tol, "pair_within_std": within_std, "min_mac": min_mac})
 
 
 def _shape_test(s1, a: int, s2, b: int) -> tuple:
@@ -208,15 +228,17 @@ def _shape_test(s1, a: int, s2, b: int) -> tuple:
     return float(z), t.p_value
 
 
-def _pair(s1, s2, tol: float, min_mac: float) -> list:
+def _pair(s1, s2, tol: float, min_mac: float, within_std: float) -> list:
     """One-to-one pairs (i, j) of modes of s1 and s2, nearest relative frequency first."""
     f1, f2 = np.asarray(s1.frequency_hz, float), np.asarray(s2.frequency_hz, float)
+    sf1, sf2 = np.asarray(s1.frequency_std, float), np.asarray(s2.frequency_std, float)
     mac = modal_assurance_criterion(s1.mode_shape, s2.mode_shape) if f1.size and f2.size else None
     cand = []
     for i in range(f1.size):
         for j in range(f2.size):
             d = abs(f1[i] - f2[j]) / max(f1[i], f2[j])
-            if d <= tol and mac[i, j] >= min_mac:
+            near = d <= tol or abs(f1[i] - f2[j]) <= within_std * np.hypot(sf1[i], sf2[j])  # NaN σ: False
+            if near and mac[i, j] >= min_mac:
                 cand.append((d, i, j))
     used1, used2, out = set(), set(), []
     for _, i, j in sorted(cand):

@@ -64,12 +64,36 @@ def test_the_second_half_takes_the_first_halfs_automatic_settings(record):
 
 def test_pairs_are_one_to_one_within_the_frequency_difference(record):
     a = Analysis.from_arrays(record.y, fs=record.fs, settings=SETTINGS)
-    tight = split_halves(a, max_frequency_difference=1e-6)
+    tight = split_halves(a, max_frequency_difference=1e-6, pair_within_std=0)
     assert tight.summary()["n_pairs"] == 0 and np.isnan(tight.summary()["rms_z_frequency"])
     assert len(tight.unmatched_hz[0]) >= 6 and len(tight.unmatched_hz[1]) >= 6
+    assert tight.pairing == {"max_frequency_difference": 1e-6, "pair_within_std": 0.0, "min_mac": 0.8}
     wide = split_halves(a, max_frequency_difference=0.5, min_mac=0.0)
     assert len(set(map(tuple, wide.frequency_hz.round(12)))) == wide.summary()["n_pairs"]
     assert len(np.unique(wide.frequency_hz[:, 0])) == len(np.unique(wide.frequency_hz[:, 1])) == len(wide.mac)
+
+
+def test_the_pairing_does_not_truncate_z_below_pair_within_std(record):
+    """With a relative window too narrow to pair anything, the σ window alone pairs exactly the mode
+    pairs (MAC ≥ 0.8) whose |z_f| is at most pair_within_std, and the report says the rule."""
+    a = Analysis.from_arrays(record.y, fs=record.fs, settings=SETTINGS)
+    halves = [a.with_settings(start=s0, stop=s1).run(check_harmonics=False, issue_warnings=False).selected
+              for s0, s1 in split_halves(a, max_frequency_difference=1e-6, pair_within_std=0).halves_s]
+    f = [np.asarray(h.frequency_hz) for h in halves]
+    sf = [np.asarray(h.frequency_std) for h in halves]
+    mac = modaluq.stabilization.modal_assurance_criterion(halves[0].mode_shape, halves[1].mode_shape)
+    z = (f[0][:, None] - f[1][None, :]) / np.hypot(sf[0][:, None], sf[1][None, :])
+    for k in (1.0, 4.0):
+        check = split_halves(a, max_frequency_difference=1e-6, pair_within_std=k)
+        assert check.summary()["n_pairs"] >= 3 and np.all(np.abs(check.z_frequency) <= k)
+        # every pair the σ window allows and no other, when each mode has one candidate
+        allowed = {(i, j) for i, j in zip(*np.nonzero((np.abs(z) <= k) & (mac >= 0.8)))}
+        assert all(np.sum([p[0] == i for p in allowed]) == 1 for i, _ in allowed)
+        got = {(int(np.flatnonzero(f[0] == p[0])[0]), int(np.flatnonzero(f[1] == p[1])[0]))
+               for p in check.frequency_hz}
+        assert got == allowed
+        assert f"or by at most {k:g} combined σ_f" in check.report()
+    assert "2 %" in split_halves(a).report() and "or by at most 4 combined σ_f" in split_halves(a).report()
 
 
 def test_bad_input_is_named(record):
@@ -82,6 +106,8 @@ def test_bad_input_is_named(record):
         split_halves(a, max_frequency_difference=0)
     with pytest.raises(ValueError, match="min_mac"):
         split_halves(a, min_mac=1.5)
+    with pytest.raises(ValueError, match="pair_within_std"):
+        split_halves(a, pair_within_std=-1)
     short = Analysis.from_arrays(record.y[:1000], fs=record.fs, settings=SETTINGS)
     with pytest.raises(ValueError, match="half 1"):
         split_halves(short)
@@ -99,6 +125,13 @@ def test_cli_split_halves_end_to_end(record, tmp_path, capsys):
     assert "## Split halves: 0-400 s against 400-800 s" in text and "6 modes in both halves" in text
     assert (out / "report.md").read_text() == text
     assert (out / "pairs.csv").read_text().splitlines()[0].startswith("frequency_hz_1,frequency_hz_2")
+    # --tolerance and --pair-within-std reach the pairing: the σ window alone pairs, the window alone not
+    argv = ["validate", "--split-halves", str(csv), "--block-rows", "15", "--order", *map(str, range(2, 31, 2)),
+            "--n-blocks", "30", "--no-progress", "--tolerance", "1e-6"]
+    assert main([*argv, "--pair-within-std", "0"]) == 0
+    assert "No mode was found in both halves" in capsys.readouterr().out
+    assert main([*argv, "--pair-within-std", "6"]) == 0
+    assert "or by at most 6 combined σ_f" in capsys.readouterr().out
 
 
 def test_cli_split_halves_reads_the_modes_at_the_representative_asked_for(record, tmp_path, capsys, monkeypatch):
@@ -139,6 +172,8 @@ def test_cli_split_halves_reads_the_modes_at_the_representative_asked_for(record
     (["--representative", "lowest"], "--representative: option(s) of --split-halves FILE"),
     (["--shape-representative", "lowest"], "--shape-representative: option(s) of --split-halves FILE"),
     (["--no-order-discrepancy"], "--no-order-discrepancy: option(s) of --split-halves FILE"),
+    (["--pair-within-std", "2"], "--pair-within-std: option(s) of --split-halves FILE"),
+    (["--split-halves", "x.csv", "--pair-within-std", "-1"], "--pair-within-std"),
     (["--split-halves", "missing.csv"], "missing.csv"),
 ])
 def test_cli_split_halves_options_are_checked(argv, message, capsys):
