@@ -95,9 +95,9 @@ def test_selected_members_mc(capsys, tmp_path):
 @pytest.mark.slow
 def test_indicators_mc(capsys):
     out = _module("indicators_mc").main(n_records=2, duration=60.0, representative="shape-lowest", structure="frame")
-    assert len(out) == 4 and all(a.shape == (2, 4, 12) for a in out.values())  # the frame's 4 modes
+    assert len(out) == 4 and all(a.shape == (2, 4, 13) for a in out.values())  # the frame's 4 modes
     text = capsys.readouterr().out
-    assert "same-mode rejected at 5 %" in text and "engineer's call (representative 'shape-lowest')" in text
+    assert "same-mode rejected at 5 %" in text and "truth rejected at 5 %" in text and "engineer's call (representative 'shape-lowest')" in text
 
 
 def test_automac_mc(capsys):
