@@ -29,9 +29,11 @@ A relative window alone truncates z_f: two frequencies more than the tolerance a
 paired, so a pair's |z_f| could be at most tolerance·f / √(σ_f₁² + σ_f₂²), which is below 1.96 for
 short halves and broad modes, biasing RMS z_f down and the share within ±1.96 up. Since
 2026-11-28 ``split_halves`` also pairs frequencies within ``pair_within_std`` (default 4) combined
-σ_f, so ``z_f_cap`` = max(tolerance·f / √(σ_f₁² + σ_f₂²), pair_within_std) is at least 4;
-``--pair-within-std 0`` gives the rule before. The tables also give the pairs with ``z_f_cap`` >= 3
-(a condition on σ, not on z), and ``--tolerance`` reruns the pairing wider.
+σ_f where neither mode has another candidate (``by_std``: such a pair), so that cap is lifted to
+4 for those modes; ``--pair-within-std 0`` gives the rule before. ``z_f_cap`` is the window's
+cap, tolerance·f / √(σ_f₁² + σ_f₂²); the tables also give the pairs with ``z_f_cap`` >= 3 (a
+condition on σ, not on z) and the pool without the ``by_std`` pairs, and ``--tolerance`` reruns
+the pairing wider.
 
 The shapes are checked alike (``z_mac``, ``mac_p_value``: the "same mode" test of the two halves'
 shapes with both shapes' covariances, ``modaluq.indicators.mac_test``): RMS z_MAC ≈ 1 and about
@@ -90,7 +92,7 @@ RECORDS = {
 
 COLUMNS = ("group", "record", "n_windows", "window", "t0_s", "t1_s", "half_s", "block_rows", "n_blocks", "orders",
            "f1_hz", "f2_hz", "sigma_f1_hz", "sigma_f2_hz", "xi1", "xi2", "sigma_xi1", "sigma_xi2",
-           "z_f", "z_xi", "z_f_cap", "mac", "z_mac", "mac_p_value", "harmonic", "rms_ratio")
+           "z_f", "z_xi", "z_f_cap", "by_std", "mac", "z_mac", "mac_p_value", "harmonic", "rms_ratio")
 
 
 def _clustering(representative):
@@ -141,7 +143,7 @@ def pairs_of_record(name, data, levels=LEVELS, tolerance=0.02, representative="m
                     orders=check.settings["orders"], f1_hz=f[m, 0], f2_hz=f[m, 1],
                     sigma_f1_hz=sf[m, 0], sigma_f2_hz=sf[m, 1], xi1=x[m, 0], xi2=x[m, 1],
                     sigma_xi1=sx[m, 0], sigma_xi2=sx[m, 1], z_f=check.z_frequency[m], z_xi=check.z_damping[m],
-                    z_f_cap=max(tolerance * f[m].max() / np.hypot(*sf[m]), pair_within_std), mac=check.mac[m], z_mac=check.z_mac[m],
+                    z_f_cap=tolerance * f[m].max() / np.hypot(*sf[m]), by_std=bool(check.by_std[m]), mac=check.mac[m], z_mac=check.z_mac[m],
                     mac_p_value=check.mac_p_value[m],
                     harmonic=bool(harmonic[m]), rms_ratio=ratio))
     return rows, failed
@@ -190,6 +192,9 @@ def print_tables(rows, failed, levels=LEVELS):
         if group == "measured":
             print(table_line("**measured, pooled**", mine))
             print(table_line("measured, pooled, without harmonic-flagged pairs", [r for r in mine if not r["harmonic"]]))
+            print(table_line("measured, pooled, without the pairs by σ alone", [r for r in mine if not r["by_std"]]))
+            print(table_line("measured, pooled, without the pairs by σ alone and harmonic-flagged pairs",
+                             [r for r in mine if not r["by_std"] and not r["harmonic"]]))
             print(table_line("measured, pooled, z_f_cap >= 3", [r for r in mine if r["z_f_cap"] >= 3]))
             print(table_line("measured, pooled, z_f_cap >= 3, without harmonic-flagged pairs",
                              [r for r in mine if r["z_f_cap"] >= 3 and not r["harmonic"]]))
@@ -200,6 +205,7 @@ def print_tables(rows, failed, levels=LEVELS):
         elif mine:
             print(table_line(f"**{group}, pooled**" + (" (not in the measured pool)" if group == "earthquake" else ""),
                              mine))
+            print(table_line(f"{group}, pooled, without the pairs by σ alone", [r for r in mine if not r["by_std"]]))
             print(table_line(f"{group}, pooled, z_f_cap >= 3", [r for r in mine if r["z_f_cap"] >= 3]))
     print()
     for name, n, k, msg in failed:

@@ -62,12 +62,17 @@ class SplitHalves:
     #: (n_pairs,) p-value of the "same mode" test of the two shapes (NaN where not defined)
     mac_p_value: np.ndarray = None
     pairing: dict = None
+    #: (n_pairs,) True where the two frequencies are farther apart than the relative window and the
+    #: pair was made by the σ window alone (``pair_within_std``)
+    by_std: np.ndarray = None
 
     def __post_init__(self):
         nan = np.full(len(self.mac), np.nan)
         for name in ("z_mac", "mac_p_value"):
             if getattr(self, name) is None:
                 object.__setattr__(self, name, nan.copy())
+        if self.by_std is None:
+            object.__setattr__(self, "by_std", np.zeros(len(self.mac), bool))
 
     @property
     def z_frequency(self) -> np.ndarray:
@@ -81,8 +86,8 @@ class SplitHalves:
         """``n_pairs``; ``rms_z_frequency``, ``rms_z_damping``, ``rms_z_mac`` (≈ 1 if σ is right); the
         share of |z| ≤ 1.96, ``within_frequency`` and ``within_damping`` (≈ 0.95); the share of
         pairs whose "same mode" test rejects at 5 %, ``same_mode_rejected`` (≈ 0.05); NaN without
-        pairs."""
-        out = {"n_pairs": int(len(self.mac))}
+        pairs; ``n_pairs_by_std``, the pairs made by the σ window alone."""
+        out = {"n_pairs": int(len(self.mac)), "n_pairs_by_std": int(np.sum(self.by_std))}
         for name, z in (("frequency", self.z_frequency), ("damping", self.z_damping)):
             z = z[np.isfinite(z)]
             out[f"rms_z_{name}"] = float(np.sqrt(np.mean(z ** 2))) if z.size else float("nan")
@@ -102,7 +107,7 @@ class SplitHalves:
                         ("damping_ratio", self.damping_ratio), ("damping_std", self.damping_std)):
             cols[f"{name}_1"], cols[f"{name}_2"] = v[:, 0], v[:, 1]
         cols.update(z_frequency=self.z_frequency, z_damping=self.z_damping, mac=self.mac, z_mac=self.z_mac,
-                    mac_p_value=self.mac_p_value)
+                    mac_p_value=self.mac_p_value, paired_by_std=self.by_std)
         return pd.DataFrame(cols)
 
     def report(self) -> str:
@@ -118,7 +123,8 @@ class SplitHalves:
         zf, zx = self.z_frequency, self.z_damping
         for k in range(s["n_pairs"]):
             f, sf, x, sx = self.frequency_hz[k], self.frequency_std[k], self.damping_ratio[k], self.damping_std[k]
-            lines.append(f"| {f[0]:.4f} | {f[1]:.4f} | {sf[0]:.2g}, {sf[1]:.2g} | {zf[k]:+.2f} | "
+            mark = " (σ)" if self.by_std[k] else ""
+            lines.append(f"| {f[0]:.4f} | {f[1]:.4f}{mark} | {sf[0]:.2g}, {sf[1]:.2g} | {zf[k]:+.2f} | "
                          f"{100 * x[0]:.2f} | {100 * x[1]:.2f} | {100 * sx[0]:.2g}, {100 * sx[1]:.2g} | "
                          f"{zx[k]:+.2f} | {self.mac[k]:.5f} | {self.z_mac[k]:+.2f} | {self.mac_p_value[k]:.2g} |")
         if s["n_pairs"]:
@@ -127,6 +133,9 @@ class SplitHalves:
                           f"{100 * s['within_damping']:.0f} % (ξ). Shapes: RMS z_MAC {s['rms_z_mac']:.2f}, \"same "
                           f"mode\" rejected at 5 % for {100 * s['same_mode_rejected']:.0f} % of the pairs. If σ is "
                           "right: RMS ≈ 1, about 95 % within, about 5 % rejected."]
+            if s["n_pairs_by_std"]:
+                lines.append(f"(σ): {s['n_pairs_by_std']} pair(s) farther apart than the relative window, paired by "
+                             "their combined σ_f alone (the only candidate of each other).")
         else:
             lines += ["", "No mode was found in both halves (within the frequency difference and MAC asked): "
                           "nothing to compare."]
@@ -135,10 +144,10 @@ class SplitHalves:
                 lines.append(f"Half {k + 1} only: " + ", ".join(f"{v:.4g}" for v in hz) + " Hz.")
         return "\n".join(lines) + "\n"
 
-
     def _pairing_line(self) -> str:
         p = self.pairing
-        within = (f" or by at most {p['pair_within_std']:g} combined σ_f" if p["pair_within_std"] > 0 else "")
+        within = (f" or, where unambiguous, by at most {p['pair_within_std']:g} combined σ_f"
+                  if p["pair_within_std"] > 0 else "")
         return (f"Pairs: frequencies apart by at most {100 * p['max_frequency_difference']:g} %{within}, "
                 f"MAC ≥ {p['min_mac']:g}, nearest first, one to one.")
 
@@ -157,13 +166,16 @@ def split_halves(analysis: Analysis, *, max_frequency_difference: float = 0.02, 
     ``n_blocks`` where not set, chosen for the half's length); the second with exactly the
     settings the first used. A mode of one half pairs with the mode of the other nearest in
     frequency, one to one, when their shapes have MAC ≥ ``min_mac`` and the two frequencies differ
-    by at most ``max_frequency_difference`` (a fraction) **or** by at most ``pair_within_std``
-    combined standard deviations √(σ_f₁² + σ_f₂²).
+    by at most ``max_frequency_difference`` (a fraction); then, among the modes left, a mode pairs
+    with one whose frequency differs by at most ``pair_within_std`` combined standard deviations
+    √(σ_f₁² + σ_f₂²) when each is the other's only candidate (``SplitHalves.by_std``).
 
     Why the second bound: a fixed relative window alone truncates z_f. Two estimates of a broad
     mode from short halves, whose combined σ_f is above 1 % of f, could never give |z_f| > 2 and
-    would make σ look too large. With the default 4, a pair the σ say is one mode is never cut
-    off (|z| > 4 has probability 6·10⁻⁵); 0 pairs by ``max_frequency_difference`` alone.
+    would make σ look too large. With the default 4, such a pair is cut off only beyond |z| = 4
+    (probability 6·10⁻⁵ if σ is right). Only where unambiguous, because a broad mode's σ window
+    can hold several modes of the other half alike in shape. 0 pairs by
+    ``max_frequency_difference`` alone (the rule before 2026-11-28).
 
     Raises
     ------
@@ -194,7 +206,8 @@ def split_halves(analysis: Analysis, *, max_frequency_difference: float = 0.02, 
         except ValueError as exc:
             raise ValueError(f"half {k + 1} ({a:g}-{b:g} s): {exc}") from None
     s1, s2 = runs[0].selected, runs[1].selected
-    pairs = _pair(s1, s2, tol, min_mac, within_std)
+    paired = _pair(s1, s2, tol, min_mac, within_std)
+    pairs = [(a, b) for a, b, _ in paired]
     i1 = np.array([p[0] for p in pairs], int)
     i2 = np.array([p[1] for p in pairs], int)
 
@@ -214,7 +227,8 @@ def split_halves(analysis: Analysis, *, max_frequency_difference: float = 0.02, 
         unmatched_hz=(np.delete(np.asarray(s1.frequency_hz, float), i1),
                       np.delete(np.asarray(s2.frequency_hz, float), i2)),
         z_mac=np.array([t[0] for t in tests], float), mac_p_value=np.array([t[1] for t in tests], float),
-        pairing={"max_frequency_difference": tol, "pair_within_std": within_std, "min_mac": min_mac})
+        pairing={"max_frequency_difference": tol, "pair_within_std": within_std, "min_mac": min_mac},
+        by_std=np.array([p[2] for p in paired], bool))
 
 
 def _shape_test(s1, a: int, s2, b: int) -> tuple:
@@ -229,21 +243,35 @@ def _shape_test(s1, a: int, s2, b: int) -> tuple:
 
 
 def _pair(s1, s2, tol: float, min_mac: float, within_std: float) -> list:
-    """One-to-one pairs (i, j) of modes of s1 and s2, nearest relative frequency first."""
+    """One-to-one pairs (i, j, by_std) of modes of s1 and s2 (:func:`split_halves`).
+
+    First the pairs within the relative window, nearest relative frequency first. Then a pair
+    within ``within_std`` combined σ_f only (``by_std`` True), and only where it is unambiguous:
+    neither mode has another candidate in the other half. A broad mode's σ window can hold several
+    modes of the other half, all alike in shape on a tower or a beam; choosing among them would
+    pair wrongly as often as not.
+    """
     f1, f2 = np.asarray(s1.frequency_hz, float), np.asarray(s2.frequency_hz, float)
     sf1, sf2 = np.asarray(s1.frequency_std, float), np.asarray(s2.frequency_std, float)
-    mac = modal_assurance_criterion(s1.mode_shape, s2.mode_shape) if f1.size and f2.size else None
-    cand = []
-    for i in range(f1.size):
-        for j in range(f2.size):
-            d = abs(f1[i] - f2[j]) / max(f1[i], f2[j])
-            near = d <= tol or abs(f1[i] - f2[j]) <= within_std * np.hypot(sf1[i], sf2[j])  # NaN σ: False
-            if near and mac[i, j] >= min_mac:
-                cand.append((d, i, j))
+    if not (f1.size and f2.size):
+        return []
+    mac = modal_assurance_criterion(s1.mode_shape, s2.mode_shape)
+    d = np.abs(f1[:, None] - f2[None, :]) / np.maximum(f1[:, None], f2[None, :])
+    combined = np.hypot(sf1[:, None], sf2[None, :])
+    with np.errstate(invalid="ignore"):  # a NaN or infinite σ pairs by the window only
+        by_std = np.isfinite(combined) & (np.abs(f1[:, None] - f2[None, :]) <= within_std * combined)
+    shape_ok = mac >= min_mac
+    in_window = (d <= tol) & shape_ok
+    candidate = in_window | (by_std & shape_ok)
     used1, used2, out = set(), set(), []
-    for _, i, j in sorted(cand):
+    for _, i, j in sorted((d[i, j], i, j) for i, j in zip(*np.nonzero(in_window))):
         if i not in used1 and j not in used2:
             used1.add(i)
             used2.add(j)
-            out.append((i, j))
+            out.append((int(i), int(j), False))
+    for i, j in zip(*np.nonzero(candidate & ~in_window)):
+        if i not in used1 and j not in used2 and candidate[i].sum() == 1 and candidate[:, j].sum() == 1:
+            used1.add(i)
+            used2.add(j)
+            out.append((int(i), int(j), True))
     return sorted(out)

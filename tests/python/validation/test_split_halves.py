@@ -1,6 +1,8 @@
 """``modaluq.validation.split_halves`` and ``modaluq validate --split-halves FILE``: the two halves
 of one record identified alike, z = (x₁ − x₂) / √(σ₁² + σ₂²) per mode found in both."""
 
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 
@@ -10,6 +12,7 @@ from modaluq.cli import main
 from modaluq.indicators import mac_test, shape_covariance
 from modaluq.simulate import simulate
 from modaluq.validation import SplitHalves, split_halves
+from modaluq.validation.split_halves import _pair
 
 SETTINGS = modaluq.Settings(block_rows=15, orders=range(2, 31, 2), n_blocks=30)
 
@@ -52,7 +55,8 @@ def test_the_halves_are_identified_alike_and_z_is_the_difference_over_its_std(re
     assert s["rms_z_mac"] == pytest.approx(np.sqrt(np.mean(check.z_mac ** 2)))
     assert s["same_mode_rejected"] == pytest.approx(np.mean(check.mac_p_value < 0.05))
     table = check.to_dataframe()
-    assert list(table["z_frequency"]) == list(check.z_frequency) and table.shape == (6, 13)
+    assert list(table["z_frequency"]) == list(check.z_frequency) and table.shape == (6, 14)
+    assert list(table["paired_by_std"]) == list(check.by_std)
     assert "6 modes in both halves" in check.report() and "RMS z_MAC" in check.report()
 
 
@@ -92,8 +96,54 @@ def test_the_pairing_does_not_truncate_z_below_pair_within_std(record):
         got = {(int(np.flatnonzero(f[0] == p[0])[0]), int(np.flatnonzero(f[1] == p[1])[0]))
                for p in check.frequency_hz}
         assert got == allowed
-        assert f"or by at most {k:g} combined σ_f" in check.report()
-    assert "2 %" in split_halves(a).report() and "or by at most 4 combined σ_f" in split_halves(a).report()
+        assert check.by_std.all() and check.summary()["n_pairs_by_std"] == check.summary()["n_pairs"]
+        assert (f"Pairs: frequencies apart by at most 0.0001 %"
+                f" or, where unambiguous, by at most {k:g} combined σ_f, MAC ≥ 0.8") in check.report()
+        assert check.report().count(" (σ) |") == check.summary()["n_pairs"]
+    default = split_halves(a)
+    assert not default.by_std.any() and "(σ)" not in default.report()
+    assert ("Pairs: frequencies apart by at most 2 % or, where unambiguous, by at most 4 combined σ_f, MAC ≥ 0.8, "
+            "nearest first, one to one.") in default.report()
+
+
+def _modes(frequency_hz, frequency_std, shapes):
+    """What _pair reads of a half's selected modes."""
+    return SimpleNamespace(frequency_hz=np.array(frequency_hz, float), frequency_std=np.array(frequency_std, float),
+                           mode_shape=np.array(shapes, complex).T)
+
+
+def test_pairs_by_sigma_only_where_unambiguous():
+    """The rules of _pair on hand-made halves (shapes as unit vectors: MAC 1 when equal, 0 when
+    orthogonal): the window first, nearest first; then a σ-only pair when neither mode has another
+    candidate; never by σ with a NaN or infinite σ."""
+    e = np.eye(4)
+    # window pair (10.0, 10.1: 1 %) beside a σ-only pair (20.0, 21.0: 4.8 %, 0.7 combined σ, z 1.4)
+    h1 = _modes([10.0, 20.0], [0.01, 0.5], [e[0], e[1]])
+    h2 = _modes([10.1, 21.0], [0.01, 0.5], [e[0], e[1]])
+    assert _pair(h1, h2, 0.02, 0.8, 4.0) == [(0, 0, False), (1, 1, True)]
+    assert _pair(h1, h2, 0.02, 0.8, 1.0) == [(0, 0, False)]            # 1.4 combined σ apart
+    assert _pair(h1, h2, 0.02, 0.8, 0.0) == [(0, 0, False)]
+    # a broad mode whose σ window holds two modes of the other half alike in shape: no pair
+    h1 = _modes([1.56], [0.04], [e[0]])
+    h2 = _modes([1.51, 1.61], [0.01, 0.003], [e[0], e[0]])
+    assert _pair(h1, h2, 0.02, 0.8, 4.0) == []
+    # ... unless the shapes tell them apart (MAC < min_mac for one of them)
+    h2 = _modes([1.51, 1.61], [0.01, 0.003], [e[0], e[2]])
+    assert _pair(h1, h2, 0.02, 0.8, 4.0) == [(0, 0, True)]
+    # the other half's mode has a second candidate: no σ-only pair either
+    h1 = _modes([1.46, 1.56], [0.012, 0.04], [e[0], e[0]])
+    h2 = _modes([1.51], [0.013], [e[0]])
+    assert _pair(h1, h2, 0.02, 0.8, 4.0) == []
+    # a window pair still forms when a σ-only candidate competes, and takes its modes first
+    h1 = _modes([5.0, 5.3], [0.001, 0.2], [e[0], e[0]])
+    h2 = _modes([5.05], [0.001], [e[0]])
+    assert _pair(h1, h2, 0.02, 0.8, 4.0) == [(0, 0, False)]
+    # NaN or infinite σ: the window only
+    for bad in (np.nan, np.inf):
+        h1 = _modes([20.0], [bad], [e[1]])
+        h2 = _modes([21.0], [0.5], [e[1]])
+        assert _pair(h1, h2, 0.02, 0.8, 4.0) == []
+        assert _pair(h1, h2, 0.06, 0.8, 4.0) == [(0, 0, False)]
 
 
 def test_bad_input_is_named(record):
@@ -131,7 +181,9 @@ def test_cli_split_halves_end_to_end(record, tmp_path, capsys):
     assert main([*argv, "--pair-within-std", "0"]) == 0
     assert "No mode was found in both halves" in capsys.readouterr().out
     assert main([*argv, "--pair-within-std", "6"]) == 0
-    assert "or by at most 6 combined σ_f" in capsys.readouterr().out
+    text = capsys.readouterr().out
+    assert "or, where unambiguous, by at most 6 combined σ_f" in text and "modes in both halves" in text
+    assert "No mode was found" not in text and " (σ) |" in text
 
 
 def test_cli_split_halves_reads_the_modes_at_the_representative_asked_for(record, tmp_path, capsys, monkeypatch):
