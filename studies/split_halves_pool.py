@@ -55,7 +55,7 @@ import modaluq
 from modaluq.analysis import Analysis
 from modaluq.harmonics import possible_harmonics
 from modaluq.io import load
-from modaluq.validation import split_halves
+from modaluq.validation import split_halves_windows
 
 Z_95 = 1.959963984540054
 LEVELS = (1, 2, 4, 8)
@@ -116,36 +116,32 @@ def pairs_of_record(name, data, levels=LEVELS, tolerance=0.02, representative="m
     ``drop_noise_twins=False``, "no-pole-reassign" with ``reassign_borrowed_poles=False``; ``pair_within_std`` is ``split_halves``' (0: the 2 % window alone)."""
     group, read, band = RECORDS[name]
     y, fs = read(data)
-    T = y.shape[0] / fs
-    rows, failed = [], []
-    for n in levels:
-        for k in range(n):
-            t0, t1 = k * T / n, (k + 1) * T / n
-            a = Analysis.from_arrays(y, fs=fs, settings=modaluq.Settings(frequency_range=band, start=t0, stop=t1),
-                                     clustering=_clustering(representative))
-            try:
-                check = split_halves(a, max_frequency_difference=tolerance, pair_within_std=pair_within_std)
-            except ValueError as exc:
-                failed.append((name, n, k, str(exc).splitlines()[0]))
-                continue
-            i0, i1, i2 = (int(round(t * fs)) for t in (t0, 0.5 * (t0 + t1), t1))
-            rms = np.sqrt(np.mean((y[i0:i1] - y[i0:i1].mean(0)) ** 2, 0)), \
-                np.sqrt(np.mean((y[i1:i2] - y[i1:i2].mean(0)) ** 2, 0))
-            ratio = float(np.max(np.maximum(rms[1] / rms[0], rms[0] / rms[1])))
-            f, sf, x, sx = check.frequency_hz, check.frequency_std, check.damping_ratio, check.damping_std
-            every = np.concatenate([f.mean(1), *check.unmatched_hz])
-            xi_every = np.concatenate([x.mean(1), np.full(sum(map(len, check.unmatched_hz)), np.nan)])
-            harmonic = possible_harmonics(y[i0:i2], fs, every, xi_every)[:len(f)] if len(f) else []
-            for m in range(len(f)):
-                rows.append(dict(
-                    group=group, record=name, n_windows=n, window=k, t0_s=t0, t1_s=t1, half_s=(t1 - t0) / 2,
-                    block_rows=check.settings["block_rows"], n_blocks=check.settings["n_blocks"],
-                    orders=check.settings["orders"], f1_hz=f[m, 0], f2_hz=f[m, 1],
-                    sigma_f1_hz=sf[m, 0], sigma_f2_hz=sf[m, 1], xi1=x[m, 0], xi2=x[m, 1],
-                    sigma_xi1=sx[m, 0], sigma_xi2=sx[m, 1], z_f=check.z_frequency[m], z_xi=check.z_damping[m],
-                    z_f_cap=tolerance * f[m].max() / np.hypot(*sf[m]), by_std=bool(check.by_std[m]), mac=check.mac[m], z_mac=check.z_mac[m],
-                    mac_p_value=check.mac_p_value[m],
-                    harmonic=bool(harmonic[m]), rms_ratio=ratio))
+    a = Analysis.from_arrays(y, fs=fs, settings=modaluq.Settings(frequency_range=band),
+                             clustering=_clustering(representative))
+    pooled = split_halves_windows(a, levels, max_frequency_difference=tolerance, pair_within_std=pair_within_std)
+    rows = []
+    failed = [(name, n, k, message) for n, k, _, message in pooled.failed]
+    for n, k, check in pooled.checks:
+        (t0, _), (_, t1) = check.halves_s
+        i0, i1, i2 = (int(round(t * fs)) for t in (t0, 0.5 * (t0 + t1), t1))
+        rms = np.sqrt(np.mean((y[i0:i1] - y[i0:i1].mean(0)) ** 2, 0)), \
+            np.sqrt(np.mean((y[i1:i2] - y[i1:i2].mean(0)) ** 2, 0))
+        ratio = float(np.max(np.maximum(rms[1] / rms[0], rms[0] / rms[1])))
+        f, sf, x, sx = check.frequency_hz, check.frequency_std, check.damping_ratio, check.damping_std
+        every = np.concatenate([f.mean(1), *check.unmatched_hz])
+        xi_every = np.concatenate([x.mean(1), np.full(sum(map(len, check.unmatched_hz)), np.nan)])
+        harmonic = possible_harmonics(y[i0:i2], fs, every, xi_every)[:len(f)] if len(f) else []
+        for m in range(len(f)):
+            rows.append(dict(
+                group=group, record=name, n_windows=n, window=k, t0_s=t0, t1_s=t1, half_s=(t1 - t0) / 2,
+                block_rows=check.settings["block_rows"], n_blocks=check.settings["n_blocks"],
+                orders=check.settings["orders"], f1_hz=f[m, 0], f2_hz=f[m, 1],
+                sigma_f1_hz=sf[m, 0], sigma_f2_hz=sf[m, 1], xi1=x[m, 0], xi2=x[m, 1],
+                sigma_xi1=sx[m, 0], sigma_xi2=sx[m, 1], z_f=check.z_frequency[m], z_xi=check.z_damping[m],
+                z_f_cap=tolerance * f[m].max() / np.hypot(*sf[m]), by_std=bool(check.by_std[m]), mac=check.mac[m],
+                z_mac=check.z_mac[m],
+                mac_p_value=check.mac_p_value[m],
+                harmonic=bool(harmonic[m]), rms_ratio=ratio))
     return rows, failed
 
 

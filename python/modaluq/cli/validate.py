@@ -20,7 +20,7 @@ from pathlib import Path
 
 from ..checks import MAX_THREADS
 from ..io import FORMATS
-from ..validation import monte_carlo, split_halves
+from ..validation import monte_carlo, split_halves, split_halves_windows
 from .common import CliError, check_output_paths, integer_option, option_error, real_option
 
 __all__ = ["register", "run"]
@@ -55,7 +55,7 @@ def _file_names(orders) -> list:
 SIMULATION_ONLY = ("records", "samples", "unknown_input_std", "damping_ratio", "n_dof", "input_dofs", "output_dofs",
                    "seed", "processes", "noise_coupling_limit")
 RECORD_ONLY = ("fs", "format", "read_option", "inputs", "outputs", "frequency_range", "start", "stop",
-               "representative", "shape_representative", "pair_within_std")
+               "representative", "shape_representative", "pair_within_std", "windows")
 
 
 def _option(name: str) -> str:
@@ -94,9 +94,12 @@ def run_split_halves(args) -> int:
         kw = {} if args.tolerance is None else {"max_frequency_difference": args.tolerance}
         if args.pair_within_std is not None:
             kw["pair_within_std"] = args.pair_within_std
-        if not args.no_progress:
-            print(f"identifying the two halves of {args.split_halves} ...", file=sys.stderr)
-        check = split_halves(analysis, **kw)
+        if args.windows is not None:
+            check = split_halves_windows(analysis, args.windows, progress=not args.no_progress, **kw)
+        else:
+            if not args.no_progress:
+                print(f"identifying the two halves of {args.split_halves} ...", file=sys.stderr)
+            check = split_halves(analysis, **kw)
     except ValueError as exc:
         raise option_error(exc, options) from None
     text = check.report()
@@ -235,6 +238,10 @@ def register(subparsers) -> None:
     g.add_argument("--pair-within-std", type=real_option(0, low_open=False), default=None, metavar="K",
                    help="also pair two modes whose frequencies differ by at most K combined sigma_f, so that the "
                         f"relative window does not truncate z_f; 0: the window alone (default {within:g})")
+    g.add_argument("--windows", type=integer_option(1), nargs="+", default=None, metavar="N",
+                   help="cut the record (or --start/--stop) into N consecutive windows, for each N given, and "
+                        "split each window into its halves: many more mode pairs (e.g. --windows 1 2 4 8); "
+                        "default: the whole record's two halves only")
     g.add_argument("--no-order-discrepancy", action="store_true",
                    help="do not widen a mode's std by the difference between its representative and its lowest "
                         "sufficient order, as for modaluq identify")

@@ -5,7 +5,8 @@ many independent records of the 6-DOF chain, each identified output-only and inp
 and per mode the mean analytic standard deviation compared with the sample standard
 deviation of the estimates.  ``modaluq validate`` runs it from the command line.
 :func:`split_halves` checks σ on a measured record instead: its two halves identified alike
-(``modaluq validate --split-halves FILE``).
+(``modaluq validate --split-halves FILE``); :func:`split_halves_windows` does it on consecutive
+windows of several lengths, for many more mode pairs (``--windows 1 2 4 8``).
 
 >>> from modaluq.validation import monte_carlo
 >>> mc = monte_carlo(200, processes=2)                               # doctest: +SKIP
@@ -15,7 +16,7 @@ deviation of the estimates.  ``modaluq validate`` runs it from the command line.
 
 from .montecarlo import MonteCarloResult, match_modes, monte_carlo, record_seed
 from .paper import METHOD_LABELS, METHODS, PAPER_N_RECORDS, PAPER_N_SAMPLES, PAPER_ORDER, PAPER_TABLE_1, PAPER_TABLE_2
-from .split_halves import SplitHalves, split_halves
+from .split_halves import PooledSplitHalves, SplitHalves, split_halves, split_halves_windows
 
 __all__ = [
     "METHODS",
@@ -29,6 +30,8 @@ __all__ = [
     "match_modes",
     "monte_carlo",
     "record_seed",
+    "PooledSplitHalves",
     "SplitHalves",
     "split_halves",
+    "split_halves_windows",
 ]

@@ -28,11 +28,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..analysis import Analysis
-from ..checks import check_real
+from ..checks import check_boolean, check_integers, check_real
 from ..indicators import mac_test, shape_covariance
 from ..stabilization import modal_assurance_criterion
 
-__all__ = ["SplitHalves", "split_halves"]
+__all__ = ["PooledSplitHalves", "SplitHalves", "split_halves", "split_halves_windows"]
 
 #: z within this of 0 counts as covered (the two-sided 95 % point of the normal).
 Z_95 = 1.959963984540054
@@ -150,6 +150,128 @@ class SplitHalves:
                   if p["pair_within_std"] > 0 else "")
         return (f"Pairs: frequencies apart by at most {100 * p['max_frequency_difference']:g} %{within}, "
                 f"MAC ≥ {p['min_mac']:g}, nearest first, one to one.")
+
+
+@dataclass(frozen=True)
+class PooledSplitHalves:
+    """:func:`split_halves` on consecutive windows of one record (:func:`split_halves_windows`).
+
+    ``checks`` holds one ``(n_windows, window, SplitHalves)`` per window that ran (window 0 is
+    the first of the n); ``failed`` one ``(n_windows, window, (t0, t1) s, message)`` per window too
+    short for the settings. Pairs of one ``n_windows`` use disjoint data and are independent; pairs
+    of different ``n_windows`` share data, so the pooled count overstates the information.
+    """
+
+    checks: tuple
+    failed: tuple
+
+    @property
+    def levels(self) -> list:
+        return sorted({n for n, _, _ in self.checks} | {n for n, _, _, _ in self.failed})
+
+    def pooled(self, n_windows=None) -> SplitHalves:
+        """The pairs of every window (or of the windows of one ``n_windows``) as one :class:`SplitHalves`."""
+        chosen = [c for n, _, c in self.checks if n_windows is None or n == n_windows]
+        if not chosen:
+            empty2, empty = np.empty((0, 2)), np.empty(0)
+            return SplitHalves(empty2, empty2, empty2, empty2, empty, halves_s=(), settings={}, unmatched_hz=((), ()))
+
+        def cat(name):
+            return np.concatenate([getattr(c, name) for c in chosen])
+
+        return SplitHalves(
+            frequency_hz=cat("frequency_hz"), frequency_std=cat("frequency_std"), damping_ratio=cat("damping_ratio"),
+            damping_std=cat("damping_std"), mac=cat("mac"), halves_s=tuple(c.halves_s for c in chosen),
+            settings={}, unmatched_hz=tuple(np.concatenate([c.unmatched_hz[k] for c in chosen]) for k in (0, 1)),
+            z_mac=cat("z_mac"), mac_p_value=cat("mac_p_value"), pairing=chosen[0].pairing, by_std=cat("by_std"))
+
+    def summary(self) -> dict:
+        """:meth:`SplitHalves.summary` of every pair, with ``n_windows_run`` and ``n_windows_failed``."""
+        return self.pooled().summary() | {"n_windows_run": len(self.checks), "n_windows_failed": len(self.failed)}
+
+    def to_dataframe(self):
+        """:meth:`SplitHalves.to_dataframe` of every window, with ``n_windows``, ``window``,
+        ``t0_s`` and ``t1_s`` (the window that was split, seconds) in front."""
+        import pandas as pd
+
+        frames = []
+        for n, k, c in self.checks:
+            df = c.to_dataframe()
+            (a, _), (_, b) = c.halves_s
+            df.insert(0, "t1_s", b)
+            df.insert(0, "t0_s", a)
+            df.insert(0, "window", k)
+            df.insert(0, "n_windows", n)
+            frames.append(df)
+        return pd.concat(frames, ignore_index=True) if frames else pd.DataFrame(
+            columns=["n_windows", "window", "t0_s", "t1_s"])
+
+    def report(self) -> str:
+        """A Markdown report: RMS z and the share within ±1.96 per number of windows and pooled,
+        the failed windows, then each window's own report."""
+        lines = ["## Split halves over consecutive windows", "",
+                 "Each window of the record is split into its two halves; pairs of one row of windows use disjoint "
+                 "data. If σ is right: RMS z ≈ 1 and about 95 % within ±1.96, over many pairs.", "",
+                 "| windows | pairs | RMS z f, ξ | within ±1.96 f, ξ | RMS z_MAC, \"same mode\" rejected |",
+                 "|---|---|---|---|---|"]
+        for label, n in [*((f"{n}", n) for n in self.levels), ("**all**", None)]:
+            s = self.pooled(n).summary()
+            if not s["n_pairs"]:
+                lines.append(f"| {label} | 0 | — | — | — |")
+                continue
+            lines.append(f"| {label} | {s['n_pairs']} | {s['rms_z_frequency']:.2f}, {s['rms_z_damping']:.2f} | "
+                         f"{100 * s['within_frequency']:.0f} %, {100 * s['within_damping']:.0f} % | "
+                         f"{s['rms_z_mac']:.2f}, {100 * s['same_mode_rejected']:.0f} % |")
+        for n, k, (a, b), message in self.failed:
+            lines.append(f"\nWindow {k + 1} of {n} ({a:g}-{b:g} s) failed: {message}")
+        text = "\n".join(lines) + "\n"
+        return text + "".join("\n" + c.report() for _, _, c in self.checks)
+
+
+def split_halves_windows(analysis: Analysis, windows=(1, 2, 4, 8), *, progress: bool = False,
+                         **pairing) -> PooledSplitHalves:
+    """:func:`split_halves` on each of n consecutive, non-overlapping windows of ``analysis``'s
+    record (its ``start``/``stop`` window), for every n of ``windows``, so that one record gives
+    many mode pairs (docs/validation.md "Pooled over windows of several lengths"): with the
+    default (1, 2, 4, 8) a record is split at four lengths, its halves from T/2 down to T/16.
+    Every window chooses its automatic settings on its own first half, as :func:`split_halves`
+    does. A window too short for them is recorded in ``failed`` and the others go on.
+    ``pairing`` are :func:`split_halves`' keywords (``max_frequency_difference``, ``min_mac``,
+    ``pair_within_std``); ``progress`` shows a progress bar of the windows (on stderr).
+
+    Raises
+    ------
+    ValueError
+        Bad ``windows`` (integers ≥ 1) or pairing keywords, or settings without the uncertainty.
+    """
+    if not isinstance(analysis, Analysis):
+        raise TypeError(f"analysis must be a modaluq.analysis.Analysis; got {type(analysis).__name__}")
+    levels = sorted(set(check_integers("windows", windows, minimum=1)))
+    progress = check_boolean("progress", progress)
+    limits = {"max_frequency_difference": dict(low=0.0, low_open=True), "min_mac": dict(low=0.0, high=1.0),
+              "pair_within_std": dict(low=0.0)}  # as split_halves checks them, before any window runs
+    unknown = set(pairing) - set(limits)
+    if unknown:
+        raise TypeError(f"split_halves_windows got unexpected keyword(s) {sorted(unknown)}")
+    for name, value in pairing.items():
+        check_real(name, value, **limits[name])
+    if not analysis.settings.uncertainty:
+        raise ValueError("split_halves compares the estimates against their σ: the settings must keep the uncertainty")
+    t0 = analysis.settings.start or 0.0
+    t1 = analysis.settings.stop if analysis.settings.stop is not None else analysis.y.shape[0] / analysis.fs
+    from tqdm.auto import tqdm
+
+    checks, failed = [], []
+    with tqdm(total=sum(levels), desc="modaluq split halves", unit="window", disable=not progress) as bar:
+        for n in levels:
+            for k in range(n):
+                a, b = t0 + k * (t1 - t0) / n, t0 + (k + 1) * (t1 - t0) / n
+                try:
+                    checks.append((n, k, split_halves(analysis.with_settings(start=a, stop=b), **pairing)))
+                except ValueError as exc:  # the window's halves are too short for its settings
+                    failed.append((n, k, (a, b), str(exc).splitlines()[0]))
+                bar.update()
+    return PooledSplitHalves(checks=tuple(checks), failed=tuple(failed))
 
 
 def _z(values: np.ndarray, stds: np.ndarray) -> np.ndarray:

@@ -11,7 +11,7 @@ from modaluq.analysis import Analysis
 from modaluq.cli import main
 from modaluq.indicators import mac_test, shape_covariance
 from modaluq.simulate import simulate
-from modaluq.validation import SplitHalves, split_halves
+from modaluq.validation import PooledSplitHalves, SplitHalves, split_halves, split_halves_windows
 from modaluq.validation.split_halves import _pair
 
 SETTINGS = modaluq.Settings(block_rows=15, orders=range(2, 31, 2), n_blocks=30)
@@ -146,6 +146,58 @@ def test_pairs_by_sigma_only_where_unambiguous():
         assert _pair(h1, h2, 0.06, 0.8, 4.0) == [(0, 0, False)]
 
 
+def test_windows_are_split_halves_of_each_window_pooled(record):
+    """split_halves_windows equals split_halves run on each window by hand; the pooled summary is
+    that of all their z; a window too short is recorded and the others go on."""
+    a = Analysis.from_arrays(record.y, fs=record.fs, settings=SETTINGS)
+    T = record.y.shape[0] / record.fs
+    pooled = split_halves_windows(a, (2, 1))
+    assert isinstance(pooled, PooledSplitHalves) and pooled.levels == [1, 2] and pooled.failed == ()
+    assert [(n, k) for n, k, _ in pooled.checks] == [(1, 0), (2, 0), (2, 1)]
+    zf, zx = [], []
+    for n, k, check in pooled.checks:
+        own = split_halves(a.with_settings(start=k * T / n, stop=(k + 1) * T / n))
+        assert check.halves_s == own.halves_s
+        np.testing.assert_array_equal(check.frequency_hz, own.frequency_hz)
+        np.testing.assert_array_equal(check.damping_std, own.damping_std)
+        zf += list(own.z_frequency)
+        zx += list(own.z_damping)
+    s = pooled.summary()
+    assert s["n_pairs"] == len(zf) >= 15 and s["n_windows_run"] == 3 and s["n_windows_failed"] == 0
+    assert s["rms_z_frequency"] == pytest.approx(np.sqrt(np.mean(np.square(zf))), rel=1e-12)
+    assert s["within_damping"] == pytest.approx(np.mean(np.abs(zx) <= 1.959963984540054))
+    assert pooled.pooled(2).summary()["n_pairs"] == len(pooled.checks[1][2].mac) + len(pooled.checks[2][2].mac)
+    table = pooled.to_dataframe()
+    assert list(table.columns[:4]) == ["n_windows", "window", "t0_s", "t1_s"] and len(table) == s["n_pairs"]
+    assert list(table["z_frequency"]) == pytest.approx(zf, rel=1e-12)
+    assert set(table.loc[table["n_windows"] == 2, "t0_s"]) == {0.0, T / 2}
+    text = pooled.report()
+    assert text.startswith("## Split halves over consecutive windows") and f"| **all** | {len(zf)} |" in text
+    assert text.count("## Split halves: ") == 3
+    # windows too short for the settings: recorded, the others still run
+    short = split_halves_windows(a, (1, 40))
+    assert len(short.checks) == 1 and len(short.failed) == 40 and short.summary()["n_windows_failed"] == 40
+    n, k, (t0, t1), message = short.failed[0]
+    assert (n, k, t0) == (40, 0, 0.0) and t1 == pytest.approx(T / 40) and "half 1" in message
+    assert "Window 1 of 40 (0-20 s) failed: half 1" in short.report()
+
+
+def test_windows_bad_input_is_named(record):
+    a = Analysis.from_arrays(record.y, fs=record.fs, settings=SETTINGS)
+    with pytest.raises(ValueError, match="windows"):
+        split_halves_windows(a, (0, 2))
+    with pytest.raises(TypeError, match="windows"):
+        split_halves_windows(a, "two")
+    with pytest.raises(ValueError, match="pair_within_std"):
+        split_halves_windows(a, (1,), pair_within_std=-1)
+    with pytest.raises(TypeError, match="tolerance"):
+        split_halves_windows(a, (1,), tolerance=0.1)
+    with pytest.raises(ValueError, match="uncertainty"):
+        split_halves_windows(a.with_settings(uncertainty=False))
+    with pytest.raises(TypeError, match="analysis must be"):
+        split_halves_windows(record.y)
+
+
 def test_bad_input_is_named(record):
     a = Analysis.from_arrays(record.y, fs=record.fs, settings=SETTINGS)
     with pytest.raises(TypeError, match="analysis must be"):
@@ -184,6 +236,13 @@ def test_cli_split_halves_end_to_end(record, tmp_path, capsys):
     text = capsys.readouterr().out
     assert "or, where unambiguous, by at most 6 combined σ_f" in text and "modes in both halves" in text
     assert "No mode was found" not in text and " (σ) |" in text
+    # --windows: the pooled check over consecutive windows, as split_halves_windows reports it
+    argv = ["validate", "--split-halves", str(csv), "--block-rows", "15", "--order", *map(str, range(2, 31, 2)),
+            "--n-blocks", "30", "--no-progress", "--windows", "1", "2", "--out", str(tmp_path / "w")]
+    assert main(argv) == 0
+    text = capsys.readouterr().out
+    assert text == split_halves_windows(Analysis.from_file(csv, settings=SETTINGS), (1, 2)).report()
+    assert (tmp_path / "w" / "pairs.csv").read_text().startswith("n_windows,window,t0_s,t1_s,frequency_hz_1")
 
 
 def test_cli_split_halves_reads_the_modes_at_the_representative_asked_for(record, tmp_path, capsys, monkeypatch):
@@ -225,6 +284,8 @@ def test_cli_split_halves_reads_the_modes_at_the_representative_asked_for(record
     (["--shape-representative", "lowest"], "--shape-representative: option(s) of --split-halves FILE"),
     (["--no-order-discrepancy"], "--no-order-discrepancy: option(s) of --split-halves FILE"),
     (["--pair-within-std", "2"], "--pair-within-std: option(s) of --split-halves FILE"),
+    (["--windows", "2"], "--windows: option(s) of --split-halves FILE"),
+    (["--split-halves", "x.csv", "--windows", "0"], "--windows"),
     (["--split-halves", "x.csv", "--pair-within-std", "-1"], "--pair-within-std"),
     (["--split-halves", "missing.csv"], "missing.csv"),
 ])
