@@ -210,7 +210,8 @@ def register(subparsers) -> None:
                    help="worker processes (default: the CPUs available; 1 runs in this process)")
     v.add_argument("--tolerance", type=real_option(0, 1, high_open=True), default=None,
                    help="relative frequency window that matches an identified mode to a true one "
-                        f"(default {d['match_tolerance']:g})")
+                        f"(default {d['match_tolerance']:g}); with --split-halves, the window that pairs the two "
+                        "halves' modes (default 0.02)")
     g = v.add_argument_group(
         "split halves (a measured record)",
         "--split-halves FILE identifies the record's two halves alike and compares each mode's two estimates "

@@ -132,7 +132,10 @@ class SplitHalves:
                           f"{s['rms_z_damping']:.2f} (ξ); within ±1.96: {100 * s['within_frequency']:.0f} % (f), "
                           f"{100 * s['within_damping']:.0f} % (ξ). Shapes: RMS z_MAC {s['rms_z_mac']:.2f}, \"same "
                           f"mode\" rejected at 5 % for {100 * s['same_mode_rejected']:.0f} % of the pairs. If σ is "
-                          "right: RMS ≈ 1, about 95 % within, about 5 % rejected."]
+                          "right: RMS ≈ 1, about 95 % within, about 5 % rejected. With "
+                          f"{s['n_pairs']} pair{'s' if s['n_pairs'] > 1 else ''}, an RMS z is known to about "
+                          f"±{1 / np.sqrt(2 * s['n_pairs']):.2f} (a handful of modes only says whether σ is grossly "
+                          "off)."]
             if s["n_pairs_by_std"]:
                 lines.append(f"(σ): {s['n_pairs_by_std']} pair(s) farther apart than the relative window, paired by "
                              "their combined σ_f alone (the only candidate of each other).")
@@ -210,20 +213,28 @@ class PooledSplitHalves:
         """A Markdown report: RMS z and the share within ±1.96 per number of windows and pooled,
         the failed windows, then each window's own report."""
         lines = ["## Split halves over consecutive windows", "",
-                 "Each window of the record is split into its two halves; pairs of one row of windows use disjoint "
-                 "data. If σ is right: RMS z ≈ 1 and about 95 % within ±1.96, over many pairs.", "",
-                 "| windows | pairs | RMS z f, ξ | within ±1.96 f, ξ | RMS z_MAC, \"same mode\" rejected |",
+                 "Each window of the record is split into its two halves. Pairs of one row (one number of windows) "
+                 "use disjoint data; rows share data, so the **all** row overstates the information. If σ is right: "
+                 "RMS z ≈ 1 and about 95 % within ±1.96, over many pairs; with n pairs an RMS z is known to about "
+                 "±1/√(2n). A structure that changes between halves (temperature, an operating machine, people on a "
+                 "floor) raises z without σ being wrong.", "",
+                 "| windows | pairs | RMS z f, ξ (± about) | within ±1.96 f, ξ | RMS z_MAC, \"same mode\" rejected |",
                  "|---|---|---|---|---|"]
         for label, n in [*((f"{n}", n) for n in self.levels), ("**all**", None)]:
             s = self.pooled(n).summary()
             if not s["n_pairs"]:
                 lines.append(f"| {label} | 0 | — | — | — |")
                 continue
-            lines.append(f"| {label} | {s['n_pairs']} | {s['rms_z_frequency']:.2f}, {s['rms_z_damping']:.2f} | "
+            lines.append(f"| {label} | {s['n_pairs']} | {s['rms_z_frequency']:.2f}, {s['rms_z_damping']:.2f} "
+                         f"(±{1 / np.sqrt(2 * s['n_pairs']):.2f}) | "
                          f"{100 * s['within_frequency']:.0f} %, {100 * s['within_damping']:.0f} % | "
                          f"{s['rms_z_mac']:.2f}, {100 * s['same_mode_rejected']:.0f} % |")
-        for n, k, (a, b), message in self.failed:
-            lines.append(f"\nWindow {k + 1} of {n} ({a:g}-{b:g} s) failed: {message}")
+        for level in self.levels:  # a few failures each; beyond three, the first and a count
+            mine = [f for f in self.failed if f[0] == level]
+            for n, k, (a, b), message in mine[:1] if len(mine) > 3 else mine:
+                lines.append(f"\nWindow {k + 1} of {n} ({a:g}-{b:g} s) failed: {message}")
+            if len(mine) > 3:
+                lines.append(f"... and {len(mine) - 1} more of the {level} windows failed (`failed` lists them).")
         text = "\n".join(lines) + "\n"
         return text + "".join("\n" + c.report() for _, _, c in self.checks)
 
@@ -255,23 +266,36 @@ def split_halves_windows(analysis: Analysis, windows=(1, 2, 4, 8), *, progress: 
         raise TypeError(f"split_halves_windows got unexpected keyword(s) {sorted(unknown)}")
     for name, value in pairing.items():
         check_real(name, value, **limits[name])
+    t0, t1 = _window(analysis)
+    from tqdm.auto import tqdm
+
+    # fewer samples than channels cannot be identified at all (and would read as a transposed array)
+    channels = analysis.y.shape[1] + (analysis.u.shape[1] if analysis.u is not None else 0)
+    checks, failed = [], []
+    with tqdm(total=sum(levels), desc="modaluq split halves", unit="window", disable=not progress) as bar:
+        for n in levels:
+            half_samples = int((t1 - t0) / n / 2 * analysis.fs)
+            for k in range(n):
+                a, b = t0 + k * (t1 - t0) / n, t0 + (k + 1) * (t1 - t0) / n
+                try:
+                    if half_samples <= 2 * channels:
+                        raise ValueError(f"halves of about {half_samples} samples, too short for {channels} channels")
+                    checks.append((n, k, split_halves(analysis.with_settings(start=a, stop=b), **pairing)))
+                except ValueError as exc:  # the window's halves are too short for its settings
+                    failed.append((n, k, (a, b), str(exc).splitlines()[0] + " (fewer windows give longer halves)"))
+                bar.update()
+    return PooledSplitHalves(checks=tuple(checks), failed=tuple(failed))
+
+
+def _window(analysis: Analysis) -> tuple:
+    """(start, stop) in seconds of the part of ``analysis``'s record that is split, checked."""
     if not analysis.settings.uncertainty:
         raise ValueError("split_halves compares the estimates against their σ: the settings must keep the uncertainty")
     t0 = analysis.settings.start or 0.0
     t1 = analysis.settings.stop if analysis.settings.stop is not None else analysis.y.shape[0] / analysis.fs
-    from tqdm.auto import tqdm
-
-    checks, failed = [], []
-    with tqdm(total=sum(levels), desc="modaluq split halves", unit="window", disable=not progress) as bar:
-        for n in levels:
-            for k in range(n):
-                a, b = t0 + k * (t1 - t0) / n, t0 + (k + 1) * (t1 - t0) / n
-                try:
-                    checks.append((n, k, split_halves(analysis.with_settings(start=a, stop=b), **pairing)))
-                except ValueError as exc:  # the window's halves are too short for its settings
-                    failed.append((n, k, (a, b), str(exc).splitlines()[0]))
-                bar.update()
-    return PooledSplitHalves(checks=tuple(checks), failed=tuple(failed))
+    if not t1 > t0:
+        raise ValueError(f"stop must be after start; got start = {t0:g} s, stop = {t1:g} s")
+    return t0, t1
 
 
 def _z(values: np.ndarray, stds: np.ndarray) -> np.ndarray:
@@ -311,10 +335,7 @@ def split_halves(analysis: Analysis, *, max_frequency_difference: float = 0.02, 
     tol = check_real("max_frequency_difference", max_frequency_difference, low=0.0, low_open=True)
     min_mac = check_real("min_mac", min_mac, low=0.0, high=1.0)
     within_std = check_real("pair_within_std", pair_within_std, low=0.0)
-    if not analysis.settings.uncertainty:
-        raise ValueError("split_halves compares the estimates against their σ: the settings must keep the uncertainty")
-    t0 = analysis.settings.start or 0.0
-    t1 = analysis.settings.stop if analysis.settings.stop is not None else analysis.y.shape[0] / analysis.fs
+    t0, t1 = _window(analysis)
     mid = 0.5 * (t0 + t1)
     runs = []
     for k, (a, b) in enumerate(((t0, mid), (mid, t1))):

@@ -58,6 +58,7 @@ def test_the_halves_are_identified_alike_and_z_is_the_difference_over_its_std(re
     assert list(table["z_frequency"]) == list(check.z_frequency) and table.shape == (6, 14)
     assert list(table["paired_by_std"]) == list(check.by_std)
     assert "6 modes in both halves" in check.report() and "RMS z_MAC" in check.report()
+    assert f"With 6 pairs, an RMS z is known to about ±{1 / np.sqrt(12):.2f}" in check.report()
 
 
 def test_the_second_half_takes_the_first_halfs_automatic_settings(record):
@@ -179,7 +180,14 @@ def test_windows_are_split_halves_of_each_window_pooled(record):
     assert len(short.checks) == 1 and len(short.failed) == 40 and short.summary()["n_windows_failed"] == 40
     n, k, (t0, t1), message = short.failed[0]
     assert (n, k, t0) == (40, 0, 0.0) and t1 == pytest.approx(T / 40) and "half 1" in message
-    assert "Window 1 of 40 (0-20 s) failed: half 1" in short.report()
+    assert "Window 1 of 40 (0-20 s) failed: half 1" in short.report() and "39 more of the 40" in short.report()
+    assert "fewer windows give longer halves" in short.failed[0][3]
+    # halves with fewer samples than twice the channels: said so, not read as a transposed array
+    tiny = split_halves_windows(a, (3000,))
+    assert not tiny.checks and len(tiny.failed) == 3000
+    assert tiny.failed[0][3].startswith("halves of about 6 samples, too short for 3 channels")
+    assert "y.T" not in tiny.report() and "| **all** | 0 |" in tiny.report()
+    assert tiny.report().count("failed:") == 1 and "... and 2999 more of the 3000 windows failed" in tiny.report()
 
 
 def test_windows_bad_input_is_named(record):
@@ -196,6 +204,10 @@ def test_windows_bad_input_is_named(record):
         split_halves_windows(a.with_settings(uncertainty=False))
     with pytest.raises(TypeError, match="analysis must be"):
         split_halves_windows(record.y)
+    with pytest.raises(ValueError, match=r"stop must be after start; got start = 400 s, stop = 300 s"):
+        split_halves_windows(a.with_settings(start=400.0, stop=300.0))
+    with pytest.raises(ValueError, match=r"stop must be after start; got start = 400 s, stop = 300 s"):
+        split_halves(a.with_settings(start=400.0, stop=300.0))
 
 
 def test_bad_input_is_named(record):
