@@ -128,7 +128,8 @@ class SplitHalves:
                          f"{100 * x[0]:.2f} | {100 * x[1]:.2f} | {100 * sx[0]:.2g}, {100 * sx[1]:.2g} | "
                          f"{zx[k]:+.2f} | {self.mac[k]:.5f} | {self.z_mac[k]:+.2f} | {self.mac_p_value[k]:.2g} |")
         if s["n_pairs"]:
-            lines += ["", f"{s['n_pairs']} modes in both halves: RMS z {s['rms_z_frequency']:.2f} (f), "
+            modes = "mode" if s["n_pairs"] == 1 else "modes"
+            lines += ["", f"{s['n_pairs']} {modes} in both halves: RMS z {s['rms_z_frequency']:.2f} (f), "
                           f"{s['rms_z_damping']:.2f} (ξ); within ±1.96: {100 * s['within_frequency']:.0f} % (f), "
                           f"{100 * s['within_damping']:.0f} % (ξ). Shapes: RMS z_MAC {s['rms_z_mac']:.2f}, \"same "
                           f"mode\" rejected at 5 % for {100 * s['same_mode_rejected']:.0f} % of the pairs. If σ is "
@@ -145,6 +146,9 @@ class SplitHalves:
         for k, hz in enumerate(self.unmatched_hz):
             if len(hz):
                 lines.append(f"Half {k + 1} only: " + ", ".join(f"{v:.4g}" for v in hz) + " Hz.")
+        if any(len(hz) for hz in self.unmatched_hz):
+            lines.append("(Unpaired: no mode of the other half near enough in frequency with MAC ≥ the pairing's, "
+                         "or, beyond the relative window, more than one candidate.)")
         return "\n".join(lines) + "\n"
 
     def _pairing_line(self) -> str:

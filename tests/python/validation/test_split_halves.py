@@ -72,6 +72,7 @@ def test_pairs_are_one_to_one_within_the_frequency_difference(record):
     tight = split_halves(a, max_frequency_difference=1e-6, pair_within_std=0)
     assert tight.summary()["n_pairs"] == 0 and np.isnan(tight.summary()["rms_z_frequency"])
     assert len(tight.unmatched_hz[0]) >= 6 and len(tight.unmatched_hz[1]) >= 6
+    assert "Half 1 only: " in tight.report() and "(Unpaired: no mode of the other half" in tight.report()
     assert tight.pairing == {"max_frequency_difference": 1e-6, "pair_within_std": 0.0, "min_mac": 0.8}
     wide = split_halves(a, max_frequency_difference=0.5, min_mac=0.0)
     assert len(set(map(tuple, wide.frequency_hz.round(12)))) == wide.summary()["n_pairs"]
@@ -186,6 +187,7 @@ def test_windows_are_split_halves_of_each_window_pooled(record):
     tiny = split_halves_windows(a, (3000,))
     assert not tiny.checks and len(tiny.failed) == 3000
     assert tiny.failed[0][3].startswith("halves of about 6 samples, too short for 3 channels")
+    assert "1 modes" not in short.report()
     assert "y.T" not in tiny.report() and "| **all** | 0 |" in tiny.report()
     assert tiny.report().count("failed:") == 1 and "... and 2999 more of the 3000 windows failed" in tiny.report()
 
