@@ -24,6 +24,7 @@ The wing's names here (``monitor``, ``Monitoring``, ``load_tracks``, ``simulate_
 from ._core import NumericalError
 from .analysis import Analysis
 from .buildinfo import show_config
+from .comparison import ModeComparison, compare_modes
 from .geometry import Geometry
 from .horizons import HorizonCheck, check_horizons
 from .identification import identify, identify_setups
@@ -44,6 +45,7 @@ __all__ = [
     "Geometry",
     "HorizonCheck",
     "ModalUQWarning",
+    "ModeComparison",
     "Modes",
     "Monitoring",
     "NumericalError",
@@ -57,6 +59,7 @@ __all__ = [
     "StabilityCriteria",
     "TrackingSettings",
     "check_horizons",
+    "compare_modes",
     "identify",
     "identify_setups",
     "load_tracks",

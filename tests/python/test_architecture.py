@@ -35,6 +35,7 @@ LAYERS = {
     "modaluq.results": 6,
     "modaluq.identification": 7, "modaluq.streaming": 7, "modaluq.poser": 7,
     "modaluq.horizons": 8, "modaluq.analysis": 8, "modaluq.campaign_analysis": 8, "modaluq.validation.*": 8,
+    "modaluq.comparison": 8,
     "modaluq.monitoring.*": 9,  # the wing, many records: its modules in WING order
     "modaluq.cli.*": 10,
     "modaluq": 11,  # the package's namespace: re-exports the public API

@@ -1,8 +1,6 @@
 """``modaluq.validation.split_halves`` and ``modaluq validate --split-halves FILE``: the two halves
 of one record identified alike, z = (x₁ − x₂) / √(σ₁² + σ₂²) per mode found in both."""
 
-from types import SimpleNamespace
-
 import numpy as np
 import pytest
 
@@ -12,7 +10,6 @@ from modaluq.cli import main
 from modaluq.indicators import mac_test, shape_covariance
 from modaluq.simulate import simulate
 from modaluq.validation import PooledSplitHalves, SplitHalves, split_halves, split_halves_windows
-from modaluq.validation.split_halves import _pair
 
 SETTINGS = modaluq.Settings(block_rows=15, orders=range(2, 31, 2), n_blocks=30)
 
@@ -106,46 +103,6 @@ def test_the_pairing_does_not_truncate_z_below_pair_within_std(record):
     assert not default.by_std.any() and "(σ)" not in default.report()
     assert ("Pairs: frequencies apart by at most 2 % or, where unambiguous, by at most 4 combined σ_f, MAC ≥ 0.8, "
             "nearest first, one to one.") in default.report()
-
-
-def _modes(frequency_hz, frequency_std, shapes):
-    """What _pair reads of a half's selected modes."""
-    return SimpleNamespace(frequency_hz=np.array(frequency_hz, float), frequency_std=np.array(frequency_std, float),
-                           mode_shape=np.array(shapes, complex).T)
-
-
-def test_pairs_by_sigma_only_where_unambiguous():
-    """The rules of _pair on hand-made halves (shapes as unit vectors: MAC 1 when equal, 0 when
-    orthogonal): the window first, nearest first; then a σ-only pair when neither mode has another
-    candidate; never by σ with a NaN or infinite σ."""
-    e = np.eye(4)
-    # window pair (10.0, 10.1: 1 %) beside a σ-only pair (20.0, 21.0: 4.8 %, 0.7 combined σ, z 1.4)
-    h1 = _modes([10.0, 20.0], [0.01, 0.5], [e[0], e[1]])
-    h2 = _modes([10.1, 21.0], [0.01, 0.5], [e[0], e[1]])
-    assert _pair(h1, h2, 0.02, 0.8, 4.0) == [(0, 0, False), (1, 1, True)]
-    assert _pair(h1, h2, 0.02, 0.8, 1.0) == [(0, 0, False)]            # 1.4 combined σ apart
-    assert _pair(h1, h2, 0.02, 0.8, 0.0) == [(0, 0, False)]
-    # a broad mode whose σ window holds two modes of the other half alike in shape: no pair
-    h1 = _modes([1.56], [0.04], [e[0]])
-    h2 = _modes([1.51, 1.61], [0.01, 0.003], [e[0], e[0]])
-    assert _pair(h1, h2, 0.02, 0.8, 4.0) == []
-    # ... unless the shapes tell them apart (MAC < min_mac for one of them)
-    h2 = _modes([1.51, 1.61], [0.01, 0.003], [e[0], e[2]])
-    assert _pair(h1, h2, 0.02, 0.8, 4.0) == [(0, 0, True)]
-    # the other half's mode has a second candidate: no σ-only pair either
-    h1 = _modes([1.46, 1.56], [0.012, 0.04], [e[0], e[0]])
-    h2 = _modes([1.51], [0.013], [e[0]])
-    assert _pair(h1, h2, 0.02, 0.8, 4.0) == []
-    # a window pair still forms when a σ-only candidate competes, and takes its modes first
-    h1 = _modes([5.0, 5.3], [0.001, 0.2], [e[0], e[0]])
-    h2 = _modes([5.05], [0.001], [e[0]])
-    assert _pair(h1, h2, 0.02, 0.8, 4.0) == [(0, 0, False)]
-    # NaN or infinite σ: the window only
-    for bad in (np.nan, np.inf):
-        h1 = _modes([20.0], [bad], [e[1]])
-        h2 = _modes([21.0], [0.5], [e[1]])
-        assert _pair(h1, h2, 0.02, 0.8, 4.0) == []
-        assert _pair(h1, h2, 0.06, 0.8, 4.0) == [(0, 0, False)]
 
 
 def test_windows_are_split_halves_of_each_window_pooled(record):
