@@ -3,11 +3,14 @@
 :func:`compare_modes` pairs the modes of two results (two records, two days, before and after a
 repair) and gives, per mode found in both, z = (x₁ − x₂) / √(σ₁² + σ₂²) for the frequency and the
 damping ratio, and the "same mode" test of the two shapes (:func:`modaluq.indicators.mac_test`).
-If nothing changed but the noise, each z is standard normal: |z| > 1.96 for about 5 % of the
-modes. A larger |z| says the difference is more than the estimation error of two records, which
-is a change of the structure **or of its conditions**: temperature moves frequencies of a bridge
-by several σ from day to day, so compare records of alike conditions, or use
-:mod:`modaluq.monitoring`, which learns that scatter from a reference period.
+If nothing changed but the noise and σ is right, each z is standard normal: |z| > 1.96 for about
+5 % of the modes, so with six modes at least one such z comes by chance a quarter of the time
+(1 − 0.95⁶). A larger |z| says the difference is more than the estimation error of two records.
+That is a change of the structure **or of its conditions** (temperature moves a bridge's
+frequencies by several σ from day to day), or of the identification (identify both records with
+the same settings), or two close modes paired crosswise, or a σ that is too small (check it on a
+record with :func:`modaluq.validation.split_halves`). Compare records of alike conditions, or use
+:mod:`modaluq.monitoring`, which learns the conditions' scatter from a reference period.
 
     >>> import modaluq
     >>> from modaluq.simulate import simulate
@@ -29,6 +32,7 @@ import numpy as np
 
 from .checks import check_real
 from .indicators import mac_test, shape_covariance
+from .selection import SelectedModes
 from .stabilization import modal_assurance_criterion
 
 __all__ = ["ModeComparison", "Z_95", "compare_modes"]
@@ -113,7 +117,7 @@ class ModeComparison:
         return "\n".join(["## Modes compared", "", *self._body()]) + "\n"
 
     def _body(self, what: str = "set", both: str = "both sets", hypothesis: str = "nothing but the noise changed "
-              "and σ is right") -> list:
+              "and σ is right", note: str = "") -> list:
         """The report's lines after its heading; ``what`` names one side ("set", "half")."""
         s = self.summary()
         lines = [*([self._pairing_line(), ""] if self.pairing else []),
@@ -135,8 +139,7 @@ class ModeComparison:
                           f"mode\" rejected at 5 % for {100 * s['same_mode_rejected']:.0f} % of the pairs. If "
                           f"{hypothesis}: RMS ≈ 1, about 95 % within, about 5 % rejected. With "
                           f"{s['n_pairs']} pair{'s' if s['n_pairs'] > 1 else ''}, an RMS z is known to about "
-                          f"±{1 / np.sqrt(2 * s['n_pairs']):.2f} (a handful of modes only says whether σ is grossly "
-                          "off)."]
+                          f"±{1 / np.sqrt(2 * s['n_pairs']):.2f}{note}."]
             if s["n_pairs_by_std"]:
                 lines.append(f"(σ): {s['n_pairs_by_std']} pair(s) farther apart than the relative window, paired by "
                              "their combined σ_f alone (the only candidate of each other).")
@@ -163,8 +166,9 @@ def compare_modes(first, second, *, max_frequency_difference: float = 0.02, min_
                   pair_within_std: float = 4.0) -> ModeComparison:
     """Pair the selected modes of ``first`` and ``second`` and compare each pair against its σ.
 
-    ``first`` and ``second`` are :class:`~modaluq.selection.SelectedModes` (or results with a
-    ``select_modes()`` method, whose default selection is taken). A mode of one pairs with the
+    ``first`` and ``second`` are :class:`~modaluq.selection.SelectedModes` of the same channels,
+    identified with the uncertainty (or a result with ``select_modes()``, whose default selection
+    is taken, or an :class:`~modaluq.analysis.Analysis` that was run). A mode of one pairs with the
     mode of the other nearest in frequency, one to one, when their shapes have MAC ≥ ``min_mac``
     and the two frequencies differ by at most ``max_frequency_difference`` (a fraction); then,
     among the modes left, a mode pairs with one whose frequency differs by at most
@@ -183,8 +187,8 @@ def compare_modes(first, second, *, max_frequency_difference: float = 0.02, min_
     Raises
     ------
     ValueError
-        A bad ``max_frequency_difference``, ``min_mac`` or ``pair_within_std``; shapes of a
-        different number of channels.
+        A bad ``max_frequency_difference``, ``min_mac`` or ``pair_within_std``; shapes of other
+        channels (count or names); modes without σ (identified with ``uncertainty=False``).
     TypeError
         ``first`` or ``second`` not selected modes.
     """
@@ -195,6 +199,10 @@ def compare_modes(first, second, *, max_frequency_difference: float = 0.02, min_
     if s1.mode_shape.shape[0] != s2.mode_shape.shape[0]:
         raise ValueError(f"first and second must have shapes of one set of channels; got {s1.mode_shape.shape[0]} "
                          f"and {s2.mode_shape.shape[0]} channels")
+    names = [tuple(getattr(s, "output_names", None) or ()) for s in (s1, s2)]
+    if all(names) and names[0] != names[1]:
+        raise ValueError(f"first and second must have shapes of one set of channels; got {list(names[0])} and "
+                         f"{list(names[1])}")
     paired = _pair(s1, s2, tol, min_mac, within_std)
     i1 = np.array([p[0] for p in paired], int)
     i2 = np.array([p[1] for p in paired], int)
@@ -215,14 +223,17 @@ def compare_modes(first, second, *, max_frequency_difference: float = 0.02, min_
         by_std=np.array([p[2] for p in paired], bool))
 
 
-def _selected(name: str, modes):
-    """Selected modes, or a result's default selection."""
-    if not hasattr(modes, "frequency_std") and callable(getattr(modes, "select_modes", None)):
+def _selected(name: str, modes) -> SelectedModes:
+    """Selected modes: given, a result's default selection, or a run Analysis's."""
+    if isinstance(getattr(modes, "selected", None), SelectedModes):
+        modes = modes.selected
+    elif not isinstance(modes, SelectedModes) and callable(getattr(modes, "select_modes", None)):
         modes = modes.select_modes()
-    for field in ("frequency_hz", "frequency_std", "damping_ratio", "damping_std", "mode_shape"):
-        if not hasattr(modes, field):
-            raise TypeError(f"{name} must be selected modes (SelectedModes, or a result with select_modes()); "
-                            f"got {type(modes).__name__}")
+    if not isinstance(modes, SelectedModes):
+        raise TypeError(f"{name} must be selected modes (SelectedModes, a result with select_modes(), or an Analysis "
+                        f"that was run); got {type(modes).__name__}")
+    if modes.n_modes and not np.any(np.isfinite(modes.frequency_std)):
+        raise ValueError(f"{name} has no σ (identified with uncertainty=False): nothing to compare against")
     return modes
 
 

@@ -48,9 +48,11 @@ class SplitHalves(ModeComparison):
     def report(self) -> str:
         """A Markdown report: the windows, the settings, the table and the summary."""
         (a0, a1), (b0, b1) = self.halves_s
+        body = self._body("half", "both halves", "σ is right",
+                          " (a handful of modes only says whether σ is grossly off)")
         return "\n".join([f"## Split halves: {a0:g}-{a1:g} s against {b0:g}-{b1:g} s", "",
                           "Settings of both halves: " + ", ".join(f"{k} {v}" for k, v in (self.settings or {}).items()),
-                          "", *self._body("half", "both halves", "σ is right")]) + "\n"
+                          "", *body]) + "\n"
 
 
 @dataclass(frozen=True)
