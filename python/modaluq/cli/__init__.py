@@ -11,7 +11,7 @@ import sys
 
 from ..buildinfo import core_summary
 from ..version import __version__
-from . import demo, identify, info, monitor, validate
+from . import compare, demo, identify, info, monitor, validate
 from .common import Parser
 
 __all__ = ["build_parser", "main"]
@@ -39,7 +39,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--version", action=_Version, help="show the version and the C++ core's CPU path, and exit")
     sub = p.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
-    for command in (demo, identify, info, monitor, validate):
+    for command in (compare, demo, identify, info, monitor, validate):
         command.register(sub)
     return p
 

@@ -10,11 +10,13 @@ import argparse
 import math
 import os
 import re
+import sys
 from pathlib import Path
 
 from ..checks import MAX_COUNT
 
-__all__ = ["CliError", "Parser", "check_output_paths", "integer_option", "option_error", "real_option"]
+__all__ = ["CliError", "Parser", "check_output_paths", "integer_option", "option_error", "pairs_output",
+           "real_option", "write_pairs_report"]
 
 
 class CliError(ValueError):
@@ -122,3 +124,29 @@ def check_image_paths(images) -> None:
         ext = Path(path).suffix.lower().lstrip(".")
         if ext not in FigureCanvasBase.get_supported_filetypes():
             raise ValueError(f"{option} {path}: unsupported image type {ext or '(none)'!r}; use e.g. .png, .pdf, .svg")
+
+
+#: The files a pairs report (``compare``, ``validate --split-halves``) writes into ``--out``.
+PAIRS_FILES = ("report.md", "pairs.csv")
+
+
+def pairs_output(out, overwrite: bool):
+    """``--out`` of a pairs report as a Path (None when not given), checked before any work."""
+    if out is None:
+        return None
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise ValueError(f"--out must be a directory; {out} is a file")
+    check_output_paths([("--out", out / name) for name in PAIRS_FILES], overwrite=overwrite)
+    return out
+
+
+def write_pairs_report(out, text: str, table) -> None:
+    """The report on stdout and, with ``out``, ``report.md`` and ``pairs.csv`` (the DataFrame ``table``)."""
+    if out is not None:
+        out.mkdir(parents=True, exist_ok=True)
+        (out / "report.md").write_text(text, encoding="utf-8")
+        table.to_csv(out / "pairs.csv", index=False)
+    sys.stdout.write(text)
+    if out is not None:
+        print(f"\nwrote {', '.join(PAIRS_FILES)} to {out}", file=sys.stderr)

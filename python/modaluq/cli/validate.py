@@ -21,7 +21,15 @@ from pathlib import Path
 from ..checks import MAX_THREADS
 from ..io import FORMATS
 from ..validation import monte_carlo, split_halves, split_halves_windows
-from .common import CliError, check_output_paths, integer_option, option_error, real_option
+from .common import (
+    CliError,
+    check_output_paths,
+    integer_option,
+    option_error,
+    pairs_output,
+    real_option,
+    write_pairs_report,
+)
 
 __all__ = ["register", "run"]
 
@@ -72,12 +80,7 @@ def run_split_halves(args) -> int:
         ["--no-freeze-noise"] if args.no_freeze_noise else [])
     if bad:
         raise CliError(f"{', '.join(bad)}: option(s) of the simulation, not of --split-halves")
-    out = None
-    if args.out is not None:
-        out = Path(args.out)
-        if out.exists() and not out.is_dir():
-            raise ValueError(f"--out must be a directory; {out} is a file")
-        check_output_paths([("--out", out / name) for name in ("report.md", "pairs.csv")], overwrite=args.overwrite)
+    out = pairs_output(args.out, args.overwrite)
     options = set(vars(args))
     try:
         names = ("frequency_range", "start", "stop", "block_rows", "past_block_rows", "n_blocks", "bootstrap_draws")
@@ -102,14 +105,7 @@ def run_split_halves(args) -> int:
             check = split_halves(analysis, **kw)
     except ValueError as exc:
         raise option_error(exc, options) from None
-    text = check.report()
-    if out is not None:
-        out.mkdir(parents=True, exist_ok=True)
-        (out / "report.md").write_text(text, encoding="utf-8")
-        check.to_dataframe().to_csv(out / "pairs.csv", index=False)
-    sys.stdout.write(text)
-    if out is not None:
-        print(f"\nwrote report.md, pairs.csv to {out}", file=sys.stderr)
+    write_pairs_report(out, check.report(), check.to_dataframe())
     return 0
 
 
