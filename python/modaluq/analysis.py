@@ -219,6 +219,14 @@ class Analysis:
                                    selected=None, harmonic_kurtosis=np.zeros(0),
                                    possible_harmonic=np.zeros(0, bool), horizons=None, warnings=())
 
+    def identified_like(self, other: "Analysis") -> "Analysis":
+        """A copy (not run) with the horizons, orders and blocks ``other``'s run used (its automatic
+        choice or its settings), so that this record is identified as ``other`` was: two records
+        compared, or the two halves of one (:func:`modaluq.compare_modes`, split halves)."""
+        other._require_run()
+        used = other.result.settings
+        return self.with_settings(**{k: used[k] for k in ("block_rows", "past_block_rows", "orders", "n_blocks")})
+
     # ------------------------------------------------------------------ steps
 
     def preprocess(self) -> Preprocessed:

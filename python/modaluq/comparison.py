@@ -35,7 +35,7 @@ from .indicators import mac_test, shape_covariance
 from .selection import SelectedModes
 from .stabilization import modal_assurance_criterion
 
-__all__ = ["ModeComparison", "Z_95", "compare_modes"]
+__all__ = ["ModeComparison", "Z_95", "check_pairing", "compare_modes"]
 
 #: z within this of 0 counts as covered (the two-sided 95 % point of the normal).
 Z_95 = 1.959963984540054
@@ -192,9 +192,7 @@ def compare_modes(first, second, *, max_frequency_difference: float = 0.02, min_
     TypeError
         ``first`` or ``second`` not selected modes.
     """
-    tol = check_real("max_frequency_difference", max_frequency_difference, low=0.0, low_open=True)
-    min_mac = check_real("min_mac", min_mac, low=0.0, high=1.0)
-    within_std = check_real("pair_within_std", pair_within_std, low=0.0)
+    pairing = check_pairing(max_frequency_difference, min_mac, pair_within_std)
     s1, s2 = (_selected(name, s) for name, s in (("first", first), ("second", second)))
     if s1.mode_shape.shape[0] != s2.mode_shape.shape[0]:
         raise ValueError(f"first and second must have shapes of one set of channels; got {s1.mode_shape.shape[0]} "
@@ -203,7 +201,7 @@ def compare_modes(first, second, *, max_frequency_difference: float = 0.02, min_
     if all(names) and names[0] != names[1]:
         raise ValueError(f"first and second must have shapes of one set of channels; got {list(names[0])} and "
                          f"{list(names[1])}")
-    paired = _pair(s1, s2, tol, min_mac, within_std)
+    paired = _pair(s1, s2, pairing["max_frequency_difference"], pairing["min_mac"], pairing["pair_within_std"])
     i1 = np.array([p[0] for p in paired], int)
     i2 = np.array([p[1] for p in paired], int)
 
@@ -219,8 +217,17 @@ def compare_modes(first, second, *, max_frequency_difference: float = 0.02, min_
         unmatched_hz=(np.delete(np.asarray(s1.frequency_hz, float), i1),
                       np.delete(np.asarray(s2.frequency_hz, float), i2)),
         z_mac=np.array([t[0] for t in tests], float), mac_p_value=np.array([t[1] for t in tests], float),
-        pairing={"max_frequency_difference": tol, "pair_within_std": within_std, "min_mac": min_mac},
+        pairing=pairing,
         by_std=np.array([p[2] for p in paired], bool))
+
+
+def check_pairing(max_frequency_difference, min_mac, pair_within_std) -> dict:
+    """The pairing of :func:`compare_modes`, checked (an error names the parameter), as the dict
+    ``ModeComparison.pairing`` holds; callers that identify first check it before they do."""
+    return {"max_frequency_difference": check_real("max_frequency_difference", max_frequency_difference, low=0.0,
+                                                   low_open=True),
+            "min_mac": check_real("min_mac", min_mac, low=0.0, high=1.0),
+            "pair_within_std": check_real("pair_within_std", pair_within_std, low=0.0)}
 
 
 def _selected(name: str, modes) -> SelectedModes:

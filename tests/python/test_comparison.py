@@ -121,6 +121,12 @@ def test_an_analysis_that_ran_and_no_pair():
     analysis = modaluq.Analysis.from_arrays(sim.y, fs=sim.fs, settings=modaluq.Settings(frequency_range=(1, 20)))
     ran = analysis.run(check_harmonics=False, issue_warnings=False)
     assert compare_modes(ran, ran.selected).summary()["rms_z_frequency"] == 0
+    # a second record identified as the first was: its horizons, orders and blocks
+    alike = modaluq.Analysis.from_arrays(simulate(20_000, seed=9).y, fs=sim.fs).identified_like(ran)
+    for key in ("block_rows", "past_block_rows", "orders", "n_blocks"):
+        assert list(np.atleast_1d(getattr(alike.settings, key))) == list(np.atleast_1d(ran.result.settings[key]))
+    with pytest.raises(ValueError, match="has not been run"):
+        ran.identified_like(alike)  # alike has not been run
     other = compare_modes(ran, _selected(8), max_frequency_difference=1e-9, pair_within_std=0)
     assert other.summary()["n_pairs"] == 0 and "No mode was found in both sets" in other.report()
 

@@ -38,13 +38,11 @@ def run(args) -> int:
             a = Analysis.from_file(file, fs=args.fs, format=args.format, read_options=read_options,
                                    outputs=args.outputs, inputs=args.inputs, references=args.references,
                                    settings=settings, criteria=criteria, clustering=clustering)
-            if args.orders is not None and not runs:
+            if runs:  # the second record exactly as the first was identified
+                a = a.identified_like(runs[0])
+            elif args.orders is not None:
                 largest, why = a.largest_order()
                 a = a.with_settings(orders=parse_orders(args.orders, largest, bound=why))
-            if runs:  # the second record exactly as the first was identified
-                used = runs[0].result.settings
-                a = a.with_settings(block_rows=used["block_rows"], past_block_rows=used["past_block_rows"],
-                                    orders=used["orders"], n_blocks=used["n_blocks"])
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
                 runs.append(a.run(check_harmonics=False, issue_warnings=False))

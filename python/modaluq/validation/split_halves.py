@@ -28,8 +28,8 @@ from dataclasses import dataclass, fields
 import numpy as np
 
 from ..analysis import Analysis
-from ..checks import check_boolean, check_integers, check_real
-from ..comparison import ModeComparison, compare_modes
+from ..checks import check_boolean, check_integers
+from ..comparison import ModeComparison, check_pairing, compare_modes
 
 __all__ = ["PooledSplitHalves", "SplitHalves", "split_halves", "split_halves_windows"]
 
@@ -82,11 +82,11 @@ class PooledSplitHalves:
         def cat(name):
             return np.concatenate([getattr(c, name) for c in chosen])
 
-        return SplitHalves(
-            frequency_hz=cat("frequency_hz"), frequency_std=cat("frequency_std"), damping_ratio=cat("damping_ratio"),
-            damping_std=cat("damping_std"), mac=cat("mac"), halves_s=tuple(c.halves_s for c in chosen),
-            settings={}, unmatched_hz=tuple(np.concatenate([c.unmatched_hz[k] for c in chosen]) for k in (0, 1)),
-            z_mac=cat("z_mac"), mac_p_value=cat("mac_p_value"), pairing=chosen[0].pairing, by_std=cat("by_std"))
+        # every per-pair array of ModeComparison joined; the unpaired modes side by side; one pairing
+        joined = {f.name: cat(f.name) for f in fields(ModeComparison) if f.name not in ("unmatched_hz", "pairing")}
+        return SplitHalves(**joined, halves_s=tuple(c.halves_s for c in chosen), settings={},
+                           unmatched_hz=tuple(np.concatenate([c.unmatched_hz[k] for c in chosen]) for k in (0, 1)),
+                           pairing=chosen[0].pairing)
 
     def summary(self) -> dict:
         """:meth:`SplitHalves.summary` of every pair, with ``n_windows_run`` and ``n_windows_failed``."""
@@ -140,15 +140,16 @@ class PooledSplitHalves:
 
 
 def split_halves_windows(analysis: Analysis, windows=(1, 2, 4, 8), *, progress: bool = False,
-                         **pairing) -> PooledSplitHalves:
+                         max_frequency_difference: float = 0.02, min_mac: float = 0.8,
+                         pair_within_std: float = 4.0) -> PooledSplitHalves:
     """:func:`split_halves` on each of n consecutive, non-overlapping windows of ``analysis``'s
     record (its ``start``/``stop`` window), for every n of ``windows``, so that one record gives
     many mode pairs (docs/validation.md "Pooled over windows of several lengths"): with the
     default (1, 2, 4, 8) a record is split at four lengths, its halves from T/2 down to T/16.
     Every window chooses its automatic settings on its own first half, as :func:`split_halves`
     does. A window too short for them is recorded in ``failed`` and the others go on.
-    ``pairing`` are :func:`split_halves`' keywords (``max_frequency_difference``, ``min_mac``,
-    ``pair_within_std``); ``progress`` shows a progress bar of the windows (on stderr).
+    ``max_frequency_difference``, ``min_mac`` and ``pair_within_std`` are :func:`split_halves`';
+    ``progress`` shows a progress bar of the windows (on stderr).
 
     Raises
     ------
@@ -159,13 +160,7 @@ def split_halves_windows(analysis: Analysis, windows=(1, 2, 4, 8), *, progress: 
         raise TypeError(f"analysis must be a modaluq.analysis.Analysis; got {type(analysis).__name__}")
     levels = sorted(set(check_integers("windows", windows, minimum=1)))
     progress = check_boolean("progress", progress)
-    limits = {"max_frequency_difference": dict(low=0.0, low_open=True), "min_mac": dict(low=0.0, high=1.0),
-              "pair_within_std": dict(low=0.0)}  # as split_halves checks them, before any window runs
-    unknown = set(pairing) - set(limits)
-    if unknown:
-        raise TypeError(f"split_halves_windows got unexpected keyword(s) {sorted(unknown)}")
-    for name, value in pairing.items():
-        check_real(name, value, **limits[name])
+    pairing = check_pairing(max_frequency_difference, min_mac, pair_within_std)  # before any window runs
     t0, t1 = _window(analysis)
     from tqdm.auto import tqdm
 
@@ -219,24 +214,19 @@ def split_halves(analysis: Analysis, *, max_frequency_difference: float = 0.02, 
     """
     if not isinstance(analysis, Analysis):
         raise TypeError(f"analysis must be a modaluq.analysis.Analysis; got {type(analysis).__name__}")
-    tol = check_real("max_frequency_difference", max_frequency_difference, low=0.0, low_open=True)
-    min_mac = check_real("min_mac", min_mac, low=0.0, high=1.0)
-    within_std = check_real("pair_within_std", pair_within_std, low=0.0)
+    pairing = check_pairing(max_frequency_difference, min_mac, pair_within_std)  # before the halves run
     t0, t1 = _window(analysis)
     mid = 0.5 * (t0 + t1)
     runs = []
     for k, (a, b) in enumerate(((t0, mid), (mid, t1))):
         half = analysis.with_settings(start=a, stop=b)
         if runs:  # the second half exactly as the first was identified
-            used = runs[0].result.settings
-            half = half.with_settings(block_rows=used["block_rows"], past_block_rows=used["past_block_rows"],
-                                      orders=used["orders"], n_blocks=used["n_blocks"])
+            half = half.identified_like(runs[0])
         try:
             runs.append(half.run(check_harmonics=False, issue_warnings=False))
         except ValueError as exc:
             raise ValueError(f"half {k + 1} ({a:g}-{b:g} s): {exc}") from None
-    c = compare_modes(runs[0].selected, runs[1].selected, max_frequency_difference=tol, min_mac=min_mac,
-                      pair_within_std=within_std)
+    c = compare_modes(runs[0].selected, runs[1].selected, **pairing)
     used = runs[0].result.settings
     return SplitHalves(**{f.name: getattr(c, f.name) for f in fields(ModeComparison)},
                        halves_s=((t0, mid), (mid, t1)),
