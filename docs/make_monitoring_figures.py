@@ -34,6 +34,10 @@ def main():
     before = after & (np.arange(ds.sizes["record"]) < 168)
     print("alarms per mode before the damage:", ds["alarm"].values[before].sum(axis=0), "of", before.sum())
     print("alarm fraction per mode after it:", np.round(ds["alarm"].values[168:].mean(axis=0), 3))
+    print("shape alarms per mode before the damage:", ds["shape_alarm"].values[before].sum(axis=0), "of", before.sum())
+    print("shape alarm fraction per mode after it:", np.round(ds["shape_alarm"].values[168:].mean(axis=0), 3))
+    print("MAC to the reference after it, smallest per mode:", np.round(np.nanmin(ds["mac_to_reference"].values[168:],
+                                                                                  axis=0), 4))
     print("reference reduced chi2 (f, xi):", np.round(ds["reference_reduced_chi2_frequency"].values, 2),
           np.round(ds["reference_reduced_chi2_damping"].values, 2))
     fig = result.plot_frequencies(modes=[1, 2, 3])

@@ -48,7 +48,8 @@ def test_every_study_is_smoke_tested():
                                            "io_block_bias.py", "poser_mc.py", "pyoma2_multisetup.py",
                                            "split_halves_pool.py", "block_scaling_mc.py",
                                            "above_order_diagnosis.py", "partial_unfreeze_mc.py",
-                                           "bootstrap_sigma_mc.py", "coupling_sketch.py", "selected_members_mc.py"}
+                                           "bootstrap_sigma_mc.py", "coupling_sketch.py", "selected_members_mc.py",
+                                           "diagram_shape_test.py"}
     assert scripts == tested
 
 
@@ -105,6 +106,14 @@ def test_automac_mc(capsys):
     assert set(out) == {f"{kind}, {call}" for kind in ("output-only", "input/output")
                         for call in ("true order", "engineer's call", "engineer's call, lowest")}
     assert "| pair | MAC | σ_MC | approx. / σ_MC | exact / σ_MC |" in capsys.readouterr().out
+
+
+def test_diagram_shape_test(capsys):
+    rows = _module("diagram_shape_test").main(1, "frame", n_samples=6000)
+    assert set(rows) == {"output-only", "input/output"}
+    for x in rows.values():  # every matched pole: its order over k*, class, MAC flag and two p-values
+        assert x.shape[1] == 5 and len(x) > 10 and set(np.unique(x[:, 1])) <= {0.0, 1.0}
+    assert "| physical |" in capsys.readouterr().out
 
 
 @pytest.mark.slow

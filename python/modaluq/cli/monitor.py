@@ -103,12 +103,15 @@ def run(args) -> int:
               f"store's 'warnings' variable); the first: {warned[0].splitlines()[0]}", file=sys.stderr)
     alarms = result.alarms()
     if len(alarms):
-        print(f"\n{len(alarms)} alarms (record, mode, frequency, standardised changes, control statistic):")
+        print(f"\n{len(alarms)} alarms (record, mode, frequency, standardised changes, control statistic, the "
+              "shape test's p-value; 'f, xi' or 'shape': which test raised it):")
         for row in alarms.head(30).itertuples():
+            which = " and ".join(w for w, on in (("f, xi", row.frequency_damping_alarm), ("shape", row.shape_alarm))
+                                 if on)
             print(f"  {row.record}  mode {row.mode}  {row.frequency_hz:.4f} Hz  z_f {row.frequency_change:+.1f}  "
-                  f"z_xi {row.damping_change:+.1f}  {row.control:.1f}")
+                  f"z_xi {row.damping_change:+.1f}  {row.control:.1f}  p_shape {row.shape_p_value:.2g}  {which}")
         if len(alarms) > 30:
-            print(f"  ... {len(alarms) - 30} more (the store's alarm variable has them all)")
+            print(f"  ... {len(alarms) - 30} more (the store's alarm and shape_alarm variables have them all)")
     for p in written:
         print(f"wrote {p}")
     if result.n_failed == result.n_records:
@@ -130,7 +133,8 @@ def register(subparsers) -> argparse.ArgumentParser:
         help="identify many records, track the modes and test their changes",
         description="Identify every record (files, folders or glob patterns) with the same settings, track the "
                     "modes from record to record against a reference period with a sigma-aware assignment, and "
-                    "test each mode's frequency and damping for a change at a stated false-alarm rate. Results go "
+                    "test each mode's frequency and damping, and its shape, for a change at a stated false-alarm rate. "
+                    "Results go "
                     "to a NetCDF/Zarr store, with a table of the poles and one of the failures beside it; a "
                     "re-run skips the records already done. Exit status 2 when no record could be identified.",
         epilog="Example: modaluq monitor data/*.csv --out tracks.nc --reference-records 48 --covariates temps.csv "

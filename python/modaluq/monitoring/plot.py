@@ -80,12 +80,15 @@ def plot_tracked_frequencies(ds, fig=None, *, modes=None, figsize=None):
         alarm = d["alarm"].values.astype(bool)
         if alarm.any():
             ax.plot(x[alarm], f[alarm], "v", color="tab:red", ms=5, label="alarm")
+        shape_alarm = d["shape_alarm"].values.astype(bool) if "shape_alarm" in d else np.zeros(f.shape, bool)
+        if shape_alarm.any():
+            ax.plot(x[shape_alarm], f[shape_alarm], "D", mfc="none", color="tab:purple", ms=5, label="shape alarm")
         ax.set_ylabel(f"mode {mode}\nf [Hz]")
         ax.grid(alpha=0.3)
     _finish_track_axes(fig, axes, xlabel, ncol=5)
     rate = ds.attrs.get("false_alarm_rate", float("nan"))
-    fig.suptitle(f"tracked frequencies (alarm: control statistic above the limit of {rate:g} false alarms per "
-                 "record and mode)", fontsize="medium")
+    fig.suptitle(f"tracked frequencies, {rate:g} false alarms per record and mode\n(alarm: the control statistic of f "
+                 "and ξ above its limit; shape alarm: the shape against the reference's beyond σ)", fontsize="medium")
     return fig
 
 

@@ -64,18 +64,25 @@ class Monitoring:
         return len(self.failures)
 
     def alarms(self):
-        """The alarms as a table: record, time, mode, frequency_hz, frequency_change,
-        damping_change (standardised), control (the statistic), sigma_confirmed (False: the mode's σ
-        is not confirmed by the reference period, its alarms are more frequent than the rate stated)."""
+        """The alarms as a table, one row per record and mode with an alarm of either test: record,
+        time, mode, frequency_hz, frequency_change, damping_change (standardised), control (the
+        statistic), sigma_confirmed (False: the mode's σ is not confirmed by the reference period,
+        its alarms are more frequent than the rate stated), shape_p_value (the shape test against
+        the reference mode), and which test raised it: frequency_damping_alarm (the change test of
+        f and ξ), shape_alarm (the shape test)."""
         import pandas as pd
 
         columns = ["record", "time", "mode", "frequency_hz", "frequency_change", "damping_change", "control",
-                   "sigma_confirmed"]
+                   "sigma_confirmed", "shape_p_value", "frequency_damping_alarm", "shape_alarm"]
         ds = self.dataset
         if ds.sizes["mode"] == 0 or "control" not in ds:
             return pd.DataFrame(columns=columns)
         df = ds[["frequency_hz", "frequency_change", "damping_change", "control", "alarm"]].to_dataframe()
-        df = df[df["alarm"].astype(bool)].drop(columns="alarm").reset_index()
+        shape_p, shape_alarm = _shape_test_of(ds)
+        df["shape_p_value"], df["shape_alarm"] = shape_p.ravel(), shape_alarm.ravel()
+        df = df.rename(columns={"alarm": "frequency_damping_alarm"})
+        df["frequency_damping_alarm"] = df["frequency_damping_alarm"].astype(bool)
+        df = df[df["frequency_damping_alarm"] | df["shape_alarm"]].reset_index()
         df["sigma_confirmed"] = ds["sigma_confirmed"].sel(mode=df["mode"].values).values.astype(bool)
         return df[columns]
 
@@ -126,23 +133,36 @@ class Monitoring:
         lines.append(f"reference: {int(ref.sum())} records; alarms at a false-alarm rate of "
                      f"{self.tracking.false_alarm_rate:g} per record and mode (median limit {shown}, "
                      f"EWMA weight {self.tracking.smoothing:g})")
-        lines.append(" mode  f_ref [Hz]  xi_ref [%]  found   reduced chi2 (f, xi)   alarms of the records tested")
+        lines.append(" mode  f_ref [Hz]  xi_ref [%]  found   reduced chi2 (f, xi)   alarms of the records tested"
+                     "   shape alarms")
         after = ~ref & (ds["status"].values == "done")
         flagged, high = miscalibrated(ds["reference_reduced_chi2_frequency"].values,
                                       ds["reference_reduced_chi2_damping"].values, int(ref.sum()),
                                       ds.sizes.get("term", 1))
+        shape_p, shape_alarm = _shape_test_of(ds)
         for j in range(ds.sizes["mode"]):
             found = np.isfinite(ds["frequency_hz"].values[:, j])
             tested = after & np.isfinite(ds["control"].values[:, j])
             n_alarm = int(ds["alarm"].values[after, j].sum())
+            shape_tested = after & np.isfinite(shape_p[:, j])
+            n_shape = int(shape_alarm[after, j].sum())
             red = (ds["reference_reduced_chi2_frequency"].values[j], ds["reference_reduced_chi2_damping"].values[j])
             flag = " !" if flagged[j] else ""
             lines.append(f" {j + 1:4d}  {ds['reference_frequency_hz'].values[j]:10.4f}  "
                          f"{100 * ds['reference_damping_ratio'].values[j]:10.3f}  {int(found.sum()):5d}   "
-                         f"{red[0]:9.2f} {red[1]:9.2f}{flag:2s}  {n_alarm:5d} of {int(tested.sum())}")
+                         f"{red[0]:9.2f} {red[1]:9.2f}{flag:2s}  {n_alarm:5d} of {int(tested.sum()):<14d}"
+                         f"{n_shape:5d} of {int(shape_tested.sum())}")
         if flagged.any():
             lines.append(f" !: reduced chi2 above {high:.2f}, its 99.9 % quantile (see the note)")
         return "\n".join(lines)
+
+
+def _shape_test_of(ds) -> tuple:
+    """(shape_p_value, shape_alarm), each (record, mode), of a store; a store written before the
+    shape test has neither: p-values unknown, no alarm."""
+    if "shape_p_value" not in ds:
+        return np.full(ds["alarm"].shape, np.nan), np.zeros(ds["alarm"].shape, bool)
+    return ds["shape_p_value"].values, ds["shape_alarm"].values.astype(bool)
 
 
 def monitor(records, *, out=None, settings: Settings | None = None, criteria: StabilityCriteria | None = None,

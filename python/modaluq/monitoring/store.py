@@ -4,9 +4,10 @@ failures beside it (docs/monitoring.md §5); :func:`load_tracks` reads a store b
 
 The Dataset's schema is here (:func:`dataset`): per record its status, failed stage, error,
 warnings, covariates and whether it is in the reference period; per record and tracked mode f, ξ,
-their σ and correlation, the MAC and distance to the reference mode, the change statistics and
-the alarms; per tracked mode the reference and its calibration. NetCDF has no complex type: the
-complex shapes (:data:`COMPLEX_SHAPES`) are stored as their real and imaginary parts.
+their σ and correlation, the MAC (with its σ) and distance to the reference mode, the shape
+test's p-value, the change statistics and the alarms (of f and ξ, and of the shape); per tracked
+mode the reference and its calibration. NetCDF has no complex type: the complex shapes
+(:data:`COMPLEX_SHAPES`) are stored as their real and imaginary parts.
 """
 
 from __future__ import annotations
@@ -85,6 +86,12 @@ def dataset(tasks: list, parts: list, done: np.ndarray, tracks, test, *, channel
         "damping_std": (rm, tracks.damping_std, {"units": "1"}),
         "frequency_damping_correlation": (rm, tracks.frequency_damping_correlation),
         "mac_to_reference": (rm, tracks.mac_to_reference),
+        "mac_to_reference_std": (rm, tracks.mac_to_reference_std,
+                                 {"long_name": "std of the MAC to the reference mode (second order)"}),
+        "shape_p_value": (rm, tracks.shape_p_value,
+                          {"long_name": "p-value of the same-mode test of the shape against the reference mode's"}),
+        "shape_alarm": (rm, tracks.shape_alarm,
+                        {"long_name": "after the reference period, shape_p_value below the false-alarm rate"}),
         "assignment_distance": (rm, tracks.assignment_distance,
                                 {"long_name": "Mahalanobis distance squared to the reference mode"}),
         "n_poles": (rm, NP), "possible_harmonic": (rm, HARM),
@@ -267,6 +274,7 @@ def load_tracks(path):
         if f"{name}_real" in ds:
             ds[name] = ds[f"{name}_real"] + 1j * ds[f"{name}_imag"]
             ds[name].attrs["long_name"] = long_name
-    if "alarm" in ds:
-        ds["alarm"] = ds["alarm"].astype(bool)
+    for flag in ("alarm", "shape_alarm"):
+        if flag in ds:
+            ds[flag] = ds[flag].astype(bool)
     return ds

@@ -17,6 +17,13 @@ every record's modes on the reference modes' axis (:class:`Tracks`), which the c
    variance; pairs with MAC < ``min_mac`` or ``|Δf|/f > max_frequency_deviation`` are
    forbidden; :func:`scipy.optimize.linear_sum_assignment` gives the cheapest one-to-one
    assignment. Unassigned modes stay with the record (``-1``).
+3. **The shape test** (:func:`shape_test`): each assigned mode's shape against its reference
+   mode's by the "same mode" test of two shapes (:func:`modaluq.indicators.mac_test`: is the MAC
+   consistent with 1 given both shapes' σ?), with the variances of the assignment's shape term.
+   Its p-value is kept per record and mode; below ``false_alarm_rate`` after the reference period
+   it is a **shape alarm**: the shape changed by more than its σ and the environment explain. The
+   gate stays the fixed ``min_mac``: a damaged mode's shape is no longer "the same" within σ, and
+   it must stay tracked (docs/monitoring.md §3).
 """
 
 from __future__ import annotations
@@ -28,10 +35,11 @@ import scipy.optimize
 
 from .. import _core
 from ..checks import check_boolean, check_integer, check_real
+from ..indicators import MacTest, mac_test
 from ..stabilization import modal_assurance_criterion
 
 __all__ = ["RecordModes", "ReferenceModes", "Tracks", "TrackingSettings", "assign", "reference_modes",
-           "reference_period", "track"]
+           "reference_period", "shape_test", "track"]
 
 #: Variance floor of a shape component (the normalised component has σ = 0).
 SHAPE_VARIANCE_FLOOR = 1e-6
@@ -57,7 +65,8 @@ class TrackingSettings:
     reference_distance : float, default 0.05
         Clustering cut of the reference period's modes on |Δf|/f + (1 − MAC).
     false_alarm_rate : float, default 0.01
-        Probability of an alarm at one record and mode when nothing changed.
+        Probability of an alarm at one record and mode when nothing changed (of the change test of
+        f and ξ, and of the shape test).
     smoothing : float, default 0.3
         EWMA weight of the newest record in the control statistic (1: each record on its own).
     inflate_to_reference : bool, default False
@@ -259,6 +268,21 @@ def assignment_cost(modes: RecordModes, ref: ReferenceModes) -> tuple:
     return cost, mac
 
 
+def shape_test(modes: RecordModes, i: int, ref: ReferenceModes, j: int) -> MacTest:
+    """The "same mode" test of record mode ``i``'s shape against reference mode ``j``'s
+    (:func:`modaluq.indicators.mac_test`), with the variances of :func:`assignment_cost`'s shape
+    term: the record's σ of each component's real and imaginary part, and for the reference its
+    σ and environmental scatter (both per component, split evenly between the real and imaginary
+    parts). Correlations between channels are not kept in the records' parts and are left out.
+    The p-value is NaN when a σ is unknown."""
+    record_var = np.concatenate([modes.mode_shape_std_real[:, i], modes.mode_shape_std_imag[:, i]]) ** 2
+    half = 0.5 * (ref.mode_shape_std[:, j] ** 2 + ref.mode_shape_scatter[:, j] ** 2)
+    if not (np.all(np.isfinite(record_var)) and np.all(np.isfinite(half))):
+        return mac_test(modes.mode_shape[:, i], ref.mode_shape[:, j])
+    return mac_test(modes.mode_shape[:, i], ref.mode_shape[:, j], np.diag(record_var),
+                    np.diag(np.concatenate([half, half])))
+
+
 def assign(modes: RecordModes, ref: ReferenceModes, settings: TrackingSettings | None = None) -> tuple:
     """``(reference_index, mac, cost)`` per record mode: the reference mode each is assigned to
     (-1: none passes the gates or a better pair took it), the MAC and the distance² to it."""
@@ -303,6 +327,9 @@ class Tracks:
     damping_std: np.ndarray
     frequency_damping_correlation: np.ndarray
     mac_to_reference: np.ndarray
+    mac_to_reference_std: np.ndarray   #: σ of the MAC to the reference mode (second order, :func:`shape_test`)
+    shape_p_value: np.ndarray          #: p-value of the "same mode" test of the shape (:func:`shape_test`)
+    shape_alarm: np.ndarray            #: bool: after the reference period, ``shape_p_value < false_alarm_rate``
     assignment_distance: np.ndarray    #: Mahalanobis distance² to the reference mode
     mode_shape: np.ndarray             #: complex
     mode_shape_std_real: np.ndarray
@@ -352,7 +379,7 @@ def track(modes: list, in_reference: np.ndarray, n_channels: int, settings: Trac
     except ValueError as exc:
         error = str(exc)
     k_modes = ref.n_modes if ref is not None else 0
-    F, XI, SF, SX, RHO, MAC, DIST = (np.full((n, k_modes), np.nan) for _ in range(7))
+    F, XI, SF, SX, RHO, MAC, MAC_STD, P_SHAPE, DIST = (np.full((n, k_modes), np.nan) for _ in range(9))
     SH = np.full((n, l, k_modes), np.nan + 0j)
     SHR, SHI = np.full((n, l, k_modes), np.nan), np.full((n, l, k_modes), np.nan)
     n_unassigned = np.zeros(n, int)
@@ -370,9 +397,14 @@ def track(modes: list, in_reference: np.ndarray, n_channels: int, settings: Trac
             F[k, j], XI[k, j] = mk.frequency_hz[i], mk.damping_ratio[i]
             SF[k, j], SX[k, j], RHO[k, j] = mk.frequency_std[i], mk.damping_std[i], mk.frequency_damping_correlation[i]
             MAC[k, j], DIST[k, j] = mac[i], dist[i]
+            t = shape_test(mk, i, ref, j)
+            MAC_STD[k, j], P_SHAPE[k, j] = t.std, t.p_value
             SH[k, :, j] = mk.mode_shape[:, i]
             SHR[k, :, j], SHI[k, :, j] = mk.mode_shape_std_real[:, i], mk.mode_shape_std_imag[:, i]
+    with np.errstate(invalid="ignore"):  # NaN: no test, no alarm
+        shape_alarm = (P_SHAPE < s.false_alarm_rate) & ~np.asarray(in_reference, bool)[:, None]
     return Tracks(reference=ref, error=error, in_reference=in_reference, index=tuple(index), frequency_hz=F,
                   damping_ratio=XI, frequency_std=SF, damping_std=SX, frequency_damping_correlation=RHO,
-                  mac_to_reference=MAC, assignment_distance=DIST, mode_shape=SH, mode_shape_std_real=SHR,
+                  mac_to_reference=MAC, mac_to_reference_std=MAC_STD, shape_p_value=P_SHAPE,
+                  shape_alarm=shape_alarm, assignment_distance=DIST, mode_shape=SH, mode_shape_std_real=SHR,
                   mode_shape_std_imag=SHI, n_unassigned=n_unassigned)

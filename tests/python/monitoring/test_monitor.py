@@ -1,6 +1,7 @@
 """modaluq.monitor: the batch, its part files, stores, notes and arguments."""
 
 import concurrent.futures
+import dataclasses
 import json
 import os
 import subprocess
@@ -337,10 +338,29 @@ def test_the_summary_is_what_a_notebook_shows_and_alarms_carry_the_modes_calibra
     assert repr(serial).startswith("<modaluq Monitoring: 24 records>\n24 records: 24 identified")
     alarms = serial.alarms()
     assert list(alarms.columns) == ["record", "time", "mode", "frequency_hz", "frequency_change", "damping_change",
-                                    "control", "sigma_confirmed"]
+                                    "control", "sigma_confirmed", "shape_p_value", "frequency_damping_alarm",
+                                    "shape_alarm"]
     confirmed = serial.dataset["sigma_confirmed"].values
     assert alarms["sigma_confirmed"].tolist() == [bool(confirmed[m - 1]) for m in alarms["mode"]]
-    assert len(alarms) == int(serial.dataset["alarm"].values.sum())
+    ds = serial.dataset
+    # one row per record and mode with an alarm of either test, each flag as the store has it
+    either = ds["alarm"].values | ds["shape_alarm"].values
+    assert len(alarms) == int(either.sum())
+    for _, row in alarms.iterrows():
+        at = dict(record=row["record"], mode=row["mode"])
+        assert row["frequency_damping_alarm"] == bool(ds["alarm"].sel(at)) and \
+            row["shape_alarm"] == bool(ds["shape_alarm"].sel(at))
+        assert row["shape_p_value"] == pytest.approx(float(ds["shape_p_value"].sel(at)), nan_ok=True)
+
+
+def test_a_store_written_before_the_shape_test_still_gives_its_summary_and_alarms(serial):
+    old = dataclasses.replace(serial, dataset=serial.dataset.drop_vars(["shape_p_value", "shape_alarm",
+                                                                         "mac_to_reference_std"]))
+    alarms = old.alarms()
+    assert len(alarms) == int(serial.dataset["alarm"].values.sum())  # the change test's alarms only
+    assert not alarms["shape_alarm"].any() and alarms["shape_p_value"].isna().all()
+    assert alarms["frequency_damping_alarm"].all()
+    assert "shape alarms" in old.summary() and " 0 of 0" in old.summary()
 
 
 def test_a_single_record_and_simulated_files_and_objects_name_their_channels_alike(campaign, tmp_path):

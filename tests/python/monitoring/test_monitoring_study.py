@@ -49,6 +49,12 @@ def test_without_damage_the_alarm_rate_is_the_rate_stated(no_damage):
     # count's variance is at most (2 - λ)/λ times the binomial's
     k = int(ds["alarm"].values[after].sum())
     assert k <= n * p + 3.1 * np.sqrt(n * p * (1 - p) * (2 - 0.3) / 0.3), (k, n * p)
+    # the shape test (per record): at most the rate stated (conservative here: the shapes' σ of these
+    # records are 7-30 % large, docs/monitoring.md §3)
+    tested = np.isfinite(ds["shape_p_value"].values[after])
+    assert tested.sum() > 0.95 * 6 * after.sum()
+    k_shape = int(ds["shape_alarm"].values[after].sum())
+    assert k_shape <= scipy.stats.binom.isf(0.001, int(tested.sum()), p), (k_shape, tested.sum() * p)
 
 
 def test_a_three_sigma_stiffness_loss_raises_the_alarm_in_nine_records_of_ten(no_damage):
@@ -74,6 +80,16 @@ def test_a_three_sigma_stiffness_loss_raises_the_alarm_in_nine_records_of_ten(no
     alarms = d["alarm"].values[40:, 0]
     assert alarms.mean() >= 0.9, alarms.mean()
     assert d["alarm"].values[20:40, 0].sum() <= 2  # before it, the stated rate
+
+
+def test_a_stiffness_loss_that_moves_a_shape_raises_its_shape_alarm():
+    # spring 3 loses 10 %: mode 3 (8.7 Hz) changes shape (its MAC to the reference stays > 0.99,
+    # far above the gate) and the shape test sees it in nearly every record after
+    camp = simulate_monitoring(60, n_samples=10_000, seed=1, damage_element=2, damage_record=40, damage_fraction=0.1)
+    d = monitor(camp.records, settings=SETTINGS, progress=False).dataset
+    assert np.nanmin(d["mac_to_reference"].values[40:, 2]) > 0.99
+    assert d["shape_alarm"].values[40:, 2].mean() >= 0.9, d["shape_alarm"].values[40:, 2].mean()
+    assert d["shape_alarm"].values[20:40].sum() <= 2  # before it, the rate stated (120 tests at 1 %)
 
 
 def test_tracks_of_modes_two_percent_apart_do_not_swap():

@@ -6,8 +6,18 @@ Every expected value comes from the construction: the frequencies and shapes dra
 
 import numpy as np
 import pytest
+import scipy.stats
 
-from modaluq.monitoring.tracking import RecordModes, TrackingSettings, assign, reference_modes, reference_period, track
+from modaluq.indicators import mac_test
+from modaluq.monitoring.tracking import (
+    RecordModes,
+    TrackingSettings,
+    assign,
+    reference_modes,
+    reference_period,
+    shape_test,
+    track,
+)
 
 TRUE_F = np.array([2.0, 5.0, 5.1, 9.0])      # 5.0 and 5.1 are 2 % apart
 TRUE_XI = np.array([0.02, 0.015, 0.03, 0.01])
@@ -113,6 +123,60 @@ def test_track_puts_every_records_modes_on_the_reference_modes():
     untracked = track(records, np.arange(13) < 2, 3)
     assert untracked.reference is None and "at least 3 are needed" in untracked.error
     assert untracked.frequency_hz.shape == (13, 0) and untracked.n_unassigned[0] == 4
+
+
+SHAPE_STD = 0.01  # σ of the real and of the imaginary part of every shape component
+
+
+def gaussian_record(rng, changed=None):
+    """The four modes with shape errors exactly as their σ state (complex Gaussian, SHAPE_STD each
+    part); ``changed``: (mode, channel, size) added to one component of the true shape."""
+    shapes = SHAPES.copy()
+    if changed is not None:
+        shapes[changed[1], changed[0]] += changed[2]
+    phi = shapes + SHAPE_STD * (rng.standard_normal(shapes.shape) + 1j * rng.standard_normal(shapes.shape))
+    std = np.full(shapes.shape, SHAPE_STD)
+    return RecordModes(frequency_hz=TRUE_F.copy(), damping_ratio=TRUE_XI.copy(), frequency_std=0.003 * TRUE_F,
+                       damping_std=np.full(4, 0.002), frequency_damping_correlation=np.zeros(4), mode_shape=phi,
+                       mode_shape_std_real=std, mode_shape_std_imag=std.copy())
+
+
+def test_the_shape_test_is_the_same_mode_test_with_the_assignments_variances():
+    rng = np.random.default_rng(5)
+    ref = reference_modes([record(rng, drift=0.004 * rng.standard_normal()) for _ in range(20)])
+    rec = record(rng)
+    # by hand: the record's σ of each part; the reference's σ and scatter, half to each part
+    half = 0.5 * (ref.mode_shape_std[:, 2] ** 2 + ref.mode_shape_scatter[:, 2] ** 2)
+    by_hand = mac_test(rec.mode_shape[:, 2], ref.mode_shape[:, 2],
+                       np.diag(np.r_[rec.mode_shape_std_real[:, 2], rec.mode_shape_std_imag[:, 2]] ** 2),
+                       np.diag(np.r_[half, half]))
+    assert shape_test(rec, 2, ref, 2) == by_hand
+    assert 0 < by_hand.p_value < 1 and by_hand.std > 0
+    # a σ unknown: the MAC alone, no p-value (no alarm can follow)
+    blind = RecordModes(**{**rec.__dict__, "mode_shape_std_real": np.full((3, 4), np.nan)})
+    t = shape_test(blind, 2, ref, 2)
+    assert t.mac == by_hand.mac and np.isnan(t.p_value) and np.isnan(t.std)
+
+
+def test_shape_alarms_keep_the_rate_without_change_and_fire_when_a_shape_moves():
+    rng = np.random.default_rng(6)
+    n_ref, n_after = 20, 300
+    records = [gaussian_record(rng) for _ in range(n_ref + n_after)]
+    rate = 0.05
+    tracks = track(records, np.arange(len(records)) < n_ref, 3, TrackingSettings(false_alarm_rate=rate))
+    assert not tracks.shape_alarm[:n_ref].any()  # never in the reference period
+    assert np.array_equal(tracks.shape_alarm[n_ref:], tracks.shape_p_value[n_ref:] < rate)
+    # errors exactly as σ states: the rate stated, within the binomial 99.9 % bounds of 1200 tests
+    n = tracks.shape_p_value[n_ref:].size
+    k = int(tracks.shape_alarm.sum())
+    assert scipy.stats.binom.ppf(0.0005, n, rate) <= k <= scipy.stats.binom.isf(0.0005, n, rate), (k, n * rate)
+    # mode 4's second component moved by 10 σ (7 σ of the difference with the reference): its MAC
+    # stays far above the gate (0.8), the test sees it
+    moved = [gaussian_record(rng, changed=(3, 1, 10 * SHAPE_STD)) for _ in range(50)]
+    tracks = track(records[:n_ref] + moved, np.arange(n_ref + 50) < n_ref, 3, TrackingSettings(false_alarm_rate=rate))
+    assert np.all(tracks.mac_to_reference[n_ref:, 3] > 0.95)
+    assert tracks.shape_alarm[n_ref:, 3].mean() >= 0.9, tracks.shape_alarm[n_ref:, 3].mean()
+    assert tracks.shape_alarm[n_ref:, :3].mean() <= 0.15
 
 
 def test_the_reference_period_takes_identified_records_only():
