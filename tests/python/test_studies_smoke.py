@@ -49,7 +49,7 @@ def test_every_study_is_smoke_tested():
                                            "split_halves_pool.py", "block_scaling_mc.py",
                                            "above_order_diagnosis.py", "partial_unfreeze_mc.py",
                                            "bootstrap_sigma_mc.py", "coupling_sketch.py", "selected_members_mc.py",
-                                           "diagram_shape_test.py"}
+                                           "diagram_shape_test.py", "regularized_gap_mc.py"}
     assert scripts == tested
 
 
@@ -158,6 +158,18 @@ def test_above_order_diagnosis(capsys, tmp_path):
     H = np.random.default_rng(1).standard_normal((6, 4))
     assert np.allclose(study.jacobian_gamma_h(H, 3, frozen_from=2), study.oracle.jacobian_Gamma_H(H, 3, frozen_from=2))
     assert "| method | order | mode | n | (a) σ_core | (b) σ_trueH |" in capsys.readouterr().out
+
+
+def test_regularized_gap_mc(capsys, tmp_path):
+    study = _module("regularized_gap_mc")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # statistics of 2 records
+        worst = study.checks(n_records=1, structure="frame")
+        out = study.main(n_records=2, structure="frame", out=tmp_path / "rg.npz", progress=False)
+    # c = 0 is the oracle's plain map and the own freeze its frozen one; the true order barely moves
+    assert worst[1] < 1e-9 and worst[2] < 1e-11 and worst[4] < 1e-2 and worst["core"] < 1e-9
+    assert (tmp_path / "rg.npz").exists() and out is not None
+    assert "| variant | order 8 | order 16 | order 24 |" in capsys.readouterr().out
 
 
 def test_partial_unfreeze_mc(capsys, tmp_path):
