@@ -79,31 +79,44 @@ def jacobian_gamma_h(H, n, frozen_from=None):
     return J
 
 
-def record_maps(y, u, fs, orders=ORDERS):
-    """H (vec), T_H, k* and per order: the oracle's frequencies and the (f, ξ) rows of the frozen
-    and the plain map (n_modes × 2 × h) of one record and method."""
+def record_realizations(y, u, fs, orders):
+    """The oracle's identification of one record: H, T_H, k*, the SVD of H and per order the
+    frequencies, damping ratios and the (f, ξ) rows of J_{θ,Γ} (2 nm × a n, "rows")."""
     cov = oracle.covariances(y, u, P, P, N_BLOCKS)
     R = [cov[k] for k in ("R1", "R2", "R3", "R4")]
     H = oracle.subspace_matrix(*R)
     T_H = oracle.jacobian_H_R(*R) @ cov["T_R"]
     l = y.shape[1]
-    n_max = max(orders)
-    k_star, _ = oracle.noise_floor(H, T_H, n_max + 1)
-    J_plain = jacobian_gamma_h(H, n_max)
-    J_frozen = jacobian_gamma_h(H, n_max, frozen_from=k_star) if k_star < n_max else J_plain
-    U, s, _ = oracle.svd_sorted(H)
-    out = {"H": oracle.vec(H), "T_H": T_H, "k_star": k_star}
+    k_star, _ = oracle.noise_floor(H, T_H, max(orders) + 1)
+    svd = oracle.svd_sorted(H)
+    U, s, _ = svd
+    out = {"H": H, "T_H": T_H, "k_star": k_star, "svd": svd}
     for n in orders:
         G = U[:, :n] * np.sqrt(s[:n])
         A, C = oracle.system_matrices(G, l)
         md = oracle.modes(A, C, fs)
         J_AC = oracle.jacobian_AC_Gamma(G, l)
         J_th = oracle.jacobian_theta_AC(A, C, fs, ref_index=md["ref_index"])
-        rows = np.vstack([J[:2] for J in J_th]) @ J_AC                      # 2 nm × a n
-        a_n = G.size
-        plain = (rows @ J_plain[:a_n]).reshape(len(J_th), 2, -1)
-        frozen = (rows @ J_frozen[:a_n]).reshape(len(J_th), 2, -1) if n > k_star else plain
-        out[n] = {"f": md["frequency_hz"], "xi": md["damping_ratio"], "frozen": frozen, "plain": plain}
+        out[n] = {"f": md["frequency_hz"], "xi": md["damping_ratio"],
+                  "rows": np.vstack([J[:2] for J in J_th]) @ J_AC, "nm": len(J_th), "a_n": G.size}
+    return out
+
+
+def record_maps(y, u, fs, orders=ORDERS):
+    """H (vec), T_H, k* and per order: the oracle's frequencies and the (f, ξ) rows of the frozen
+    and the plain map (n_modes × 2 × h) of one record and method."""
+    rec = record_realizations(y, u, fs, orders)
+    H, k_star = rec["H"], rec["k_star"]
+    n_max = max(orders)
+    J_plain = jacobian_gamma_h(H, n_max)
+    J_frozen = jacobian_gamma_h(H, n_max, frozen_from=k_star) if k_star < n_max else J_plain
+    out = {"H": oracle.vec(H), "T_H": rec["T_H"], "k_star": k_star}
+    for n in orders:
+        md = rec[n]
+        rows, a_n, nm = md["rows"], md["a_n"], md["nm"]
+        plain = (rows @ J_plain[:a_n]).reshape(nm, 2, -1)
+        frozen = (rows @ J_frozen[:a_n]).reshape(nm, 2, -1) if n > k_star else plain
+        out[n] = {"f": md["f"], "xi": md["xi"], "frozen": frozen, "plain": plain}
     return out
 
 

@@ -57,49 +57,58 @@ def record_sigmas(y, u, fs, orders):
     out = {"k_star": rec["k_star"]}
     for n in orders:
         md = rec[n]
-        out[n] = {"f": md["f"], "xi": md["xi"], "frozen": np.linalg.norm(md["frozen"] @ rec["T_H"], axis=-1),
-                  "plain": np.linalg.norm(md["plain"] @ rec["T_H"], axis=-1)}
+        out[n] = {"f": md["f"], "xi": md["xi"], "s_frozen": np.linalg.norm(md["frozen"] @ rec["T_H"], axis=-1),
+                  "s_plain": np.linalg.norm(md["plain"] @ rec["T_H"], axis=-1)}
     return out
+
+
+def run_records(n_records, kw, orders, seed, progress, max_seconds, record_fn, fields):
+    """The Monte Carlo loop of these studies: record k = ``simulate(N_SAMPLES, seed=record_seed(seed,
+    k), **kw)``, identified output-only and input/output by ``record_fn(y, u, fs, orders)`` (a dict
+    with "k_star" and per order "f", "xi" and each field); the poles matched to the true modes.
+    Returns arrays method × order × record × mode [× the field's shape], cut to the records done
+    (``max_seconds``: stop after the record that crosses it), and "k_star", "true_f", "true_xi",
+    "orders", "seconds"."""
+    truth = simulate(N_SAMPLES, seed=record_seed(seed, 0), **kw)
+    nt = truth.frequency_hz.size
+    M, O, R = len(METHODS), len(orders), n_records
+    res = {key: np.full((M, O, R, nt) + tuple(shape), np.nan) for key, shape in {"f": (), "xi": (), **fields}.items()}
+    res["k_star"] = np.zeros((M, R), int)
+    t0 = time.perf_counter()
+    done = 0
+    for k in range(R):
+        sim = simulate(N_SAMPLES, seed=record_seed(seed, k), **kw)
+        for m, u in enumerate((None, sim.u)):
+            rec = record_fn(sim.y, u, sim.fs, orders)
+            res["k_star"][m, k] = rec["k_star"]
+            for o, n in enumerate(orders):
+                md = rec[n]
+                idx = match_modes(md["f"], truth.frequency_hz)
+                for i in np.flatnonzero(idx >= 0):
+                    for key in ("f", "xi", *fields):
+                        res[key][m, o, k, i] = md[key][idx[i]]
+        done = k + 1
+        if record_done(k, R, t0, progress, max_seconds):
+            break
+    for key in ("f", "xi", *fields):
+        res[key] = res[key][:, :, :done]
+    res["k_star"] = res["k_star"][:, :done]
+    res["orders"] = np.array(orders)
+    res["true_f"], res["true_xi"] = truth.frequency_hz, truth.damping_ratio
+    res["seconds"] = time.perf_counter() - t0
+    return res
 
 
 def run(n_records, structure="chain", seed=0, progress=True, max_seconds=None):
     """Simulate and identify; arrays method × order × record × mode [× 2]. With ``max_seconds``,
     stops after the record that crosses it (the arrays are cut to the records done)."""
     kw, orders = STRUCTURES[structure]
-    truth = simulate(N_SAMPLES, seed=record_seed(seed, 0), **kw)
-    nt = truth.frequency_hz.size
-    M, O, R = len(METHODS), len(orders), n_records
-    nan = np.full((M, O, R, nt), np.nan)
-    res = {"f": nan.copy(), "xi": nan.copy(), "rho": nan.copy(),
-           "s_frozen": np.full((M, O, R, nt, 2), np.nan), "s_plain": np.full((M, O, R, nt, 2), np.nan),
-           "k_star": np.zeros((M, R), int)}
-    t0 = time.perf_counter()
-    done = 0
-    for k in range(R):
-        sim = simulate(N_SAMPLES, seed=record_seed(seed, k), **kw)
-        for m, u in enumerate((None, sim.u)):
-            rec = record_sigmas(sim.y, u, sim.fs, orders)
-            res["k_star"][m, k] = rec["k_star"]
-            for o, n in enumerate(orders):
-                md = rec[n]
-                idx = match_modes(md["f"], truth.frequency_hz)
-                for i in np.flatnonzero(idx >= 0):
-                    j = idx[i]
-                    res["f"][m, o, k, i], res["xi"][m, o, k, i] = md["f"][j], md["xi"][j]
-                    res["s_frozen"][m, o, k, i], res["s_plain"][m, o, k, i] = md["frozen"][j], md["plain"][j]
-        done = k + 1
-        if record_done(k, R, t0, progress, max_seconds):
-            break
-    for key in ("f", "xi", "rho", "s_frozen", "s_plain"):
-        res[key] = res[key][:, :, :done]
-    res["k_star"] = res["k_star"][:, :done]
+    res = run_records(n_records, kw, orders, seed, progress, max_seconds, record_sigmas,
+                      {"s_frozen": (2,), "s_plain": (2,)})
     with np.errstate(divide="ignore", invalid="ignore"):
         res["rho"] = np.maximum(1.0, np.max(res["s_plain"] / res["s_frozen"], axis=-1))
-    res["orders"] = np.array(orders)
     res["kappas"] = np.array(KAPPAS)
     res["structure"] = np.array(structure)
-    res["true_f"], res["true_xi"] = truth.frequency_hz, truth.damping_ratio
-    res["seconds"] = time.perf_counter() - t0
     return res
 
 
@@ -110,10 +119,16 @@ def sigma_kappa(s_frozen, s_plain, kappa):
 
 def table(res):
     """stats[κ, method, order, mode, var] = (median, coverage, RMS z, n)."""
-    K, (M, O, _, nt) = len(res["kappas"]), res["f"].shape
-    st = np.full((K, M, O, nt, 2, 4), np.nan)
-    for c, kap in enumerate(res["kappas"]):
-        sig = sigma_kappa(res["s_frozen"], res["s_plain"], kap)
+    return variant_stats(res, [sigma_kappa(res["s_frozen"], res["s_plain"], kap) for kap in res["kappas"]])
+
+
+def variant_stats(res, sigmas):
+    """stats[variant, method, order, mode, var] = (median σ/σ_MC, coverage, RMS z, n) of f and ξ,
+    ``sigmas`` one (method × order × record × mode × 2) array of σ per variant; poles with
+    ρ > LIMIT left out."""
+    M, O, _, nt = res["f"].shape
+    st = np.full((len(sigmas), M, O, nt, 2, 4), np.nan)
+    for c, sig in enumerate(sigmas):
         for m in range(M):
             for o in range(O):
                 for i in range(nt):
@@ -146,36 +161,50 @@ def report(res):
     lines.append("k* over records: " + "; ".join(
         f"{meth}: " + ", ".join(f"{v}×{c}" for v, c in enumerate(b) if c) for meth, b in ks.items()))
     lines.append("")
-    head = " | ".join(f"κ={k:g}" for k in kappas)
+    lines += per_mode_tables(st, [f"κ={k:g}" for k in kappas], orders, nt, symbol="σ_κ")
+    lines += pooled_table(st, [f"{k:g}" for k in kappas], orders, nt, "κ")
+    return "\n".join(lines)
+
+
+def per_mode_tables(st, heads, orders, nt, symbol="σ") -> list:
+    """The tables of f and ξ, a row per method × order × mode and a column per variant of ``st``
+    (stats[variant, method, order, mode, var] = (median, coverage, RMS z, n))."""
+    lines = []
     for v, name in ((0, "f"), (1, "ξ")):
-        lines.append(f"**{name}**: median σ_κ/σ_MC · coverage of ±1.96 σ_κ · RMS z")
+        lines.append(f"**{name}**: median {symbol}/σ_MC · coverage of ±1.96 {symbol} · RMS z")
         lines.append("")
-        lines.append(f"| method | order | mode | n | {head} |")
-        lines.append("|---|---|---|---|" + "---|" * len(kappas))
+        lines.append(f"| method | order | mode | n | {' | '.join(heads)} |")
+        lines.append("|---|---|---|---|" + "---|" * len(heads))
         for m, meth in enumerate(METHODS):
             for o, n in enumerate(orders):
                 for i in range(nt):
                     cells = [f"{st[c, m, o, i, v, 0]:.2f} · {st[c, m, o, i, v, 1]:.2f} · {st[c, m, o, i, v, 2]:.2f}"
-                             for c in range(len(kappas))]
+                             for c in range(len(heads))]
                     lines.append(f"| {meth} | {n} | {i + 1} | {int(st[0, m, o, i, v, 3])} | " + " | ".join(cells) + " |")
         lines.append("")
-    lines.append(f"Pooled, modes 2–{nt}, OO and IO, f and ξ: cells in the bands (coverage "
-                 f"{COVERAGE_BAND[0]:.2f}–{COVERAGE_BAND[1]:.2f} and median {MEDIAN_BAND[0]:.2f}–{MEDIAN_BAND[1]:.2f}) "
-                 "/ cells; worst coverage; range of RMS z")
-    lines.append("")
-    lines.append("| κ | " + " | ".join(f"order {n}" for n in orders) + " |")
-    lines.append("|---|" + "---|" * O)
-    for c, kap in enumerate(kappas):
+    return lines
+
+
+def pooled_table(st, labels, orders, nt, label_head, with_median=False) -> list:
+    """A row per variant of ``st``, pooled over modes 2.., OO and IO, f and ξ: cells in both bands /
+    cells, the worst coverage, the range of RMS z (and of the median σ/σ_MC)."""
+    lines = [f"Pooled, modes 2–{nt}, OO and IO, f and ξ: cells in the bands (coverage "
+             f"{COVERAGE_BAND[0]:.2f}–{COVERAGE_BAND[1]:.2f} and median {MEDIAN_BAND[0]:.2f}–{MEDIAN_BAND[1]:.2f}) "
+             "/ cells; worst coverage; range of RMS z" + ("; range of the median σ/σ_MC" if with_median else ""), ""]
+    lines.append(f"| {label_head} | " + " | ".join(f"order {n}" for n in orders) + " |")
+    lines.append("|---|" + "---|" * len(orders))
+    for c, label in enumerate(labels):
         cells = []
-        for o in range(O):
+        for o in range(len(orders)):
             s = st[c, :, o, 1:, :, :]                                                # M × modes × 2 × 4
             med, cov, rz = s[..., 0].ravel(), s[..., 1].ravel(), s[..., 2].ravel()
             ok = np.isfinite(med)
             inb = int(_in_band(med[ok], cov[ok]).sum())
-            cells.append(f"{inb}/{int(ok.sum())}; cov ≥ {np.nanmin(cov):.2f}; RMS z {np.nanmin(rz):.2f}–{np.nanmax(rz):.2f}")
-        lines.append(f"| {kap:g} | " + " | ".join(cells) + " |")
+            cell = f"{inb}/{int(ok.sum())}; cov ≥ {np.nanmin(cov):.2f}; RMS z {np.nanmin(rz):.2f}–{np.nanmax(rz):.2f}"
+            cells.append(cell + (f"; median {np.nanmin(med):.2f}–{np.nanmax(med):.2f}" if with_median else ""))
+        lines.append(f"| {label} | " + " | ".join(cells) + " |")
     lines.append("")
-    return "\n".join(lines)
+    return lines
 
 
 def main(n_records=100, structure="chain", seed=0, out=None, progress=True, max_seconds=None):

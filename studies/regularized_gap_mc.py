@@ -39,7 +39,6 @@ from __future__ import annotations
 
 import pathlib
 import sys
-import time
 import warnings
 
 import numpy as np
@@ -56,15 +55,22 @@ from above_order_diagnosis import (  # noqa: E402
     N_BLOCKS,
     P,
     _perm,
-    _stats,
     finish,
     jacobian_gamma_h,
     oracle,
-    record_done,
+    record_realizations,
     reprint,
     study_parser,
 )
-from partial_unfreeze_mc import COVERAGE_BAND, LIMIT, MEDIAN_BAND, METHODS, N_SAMPLES, _in_band  # noqa: E402
+from partial_unfreeze_mc import (  # noqa: E402
+    LIMIT,
+    METHODS,
+    N_SAMPLES,
+    per_mode_tables,
+    pooled_table,
+    run_records,
+    variant_stats,
+)
 
 CS = (0.5, 1.0, 1.6, 3.0, 10.0)
 FORMS = ("saturating", "tikhonov")
@@ -123,23 +129,8 @@ def jacobian_gamma_h_reg(H, n, W, frozen_from=None, svd=None):
 
 def record_parts(y, u, fs, orders):
     """H, T_H, k*, the SVD, Ua^b and per order the oracle's f, ξ and the (f, ξ) rows (2 nm × a n)."""
-    cov = oracle.covariances(y, u, P, P, N_BLOCKS)
-    R = [cov[k] for k in ("R1", "R2", "R3", "R4")]
-    H = oracle.subspace_matrix(*R)
-    T_H = oracle.jacobian_H_R(*R) @ cov["T_R"]
-    l = y.shape[1]
-    k_star, _ = oracle.noise_floor(H, T_H, max(orders) + 1)
-    svd = oracle.svd_sorted(H)
-    U, s, _ = svd
-    out = {"H": H, "T_H": T_H, "k_star": k_star, "svd": svd, "Ua": block_projections(svd[0], svd[2], T_H)}
-    for n in orders:
-        G = U[:, :n] * np.sqrt(s[:n])
-        A, C = oracle.system_matrices(G, l)
-        md = oracle.modes(A, C, fs)
-        J_AC = oracle.jacobian_AC_Gamma(G, l)
-        J_th = oracle.jacobian_theta_AC(A, C, fs, ref_index=md["ref_index"])
-        out[n] = {"f": md["frequency_hz"], "xi": md["damping_ratio"],
-                  "rows": np.vstack([J[:2] for J in J_th]) @ J_AC, "nm": len(J_th)}
+    out = record_realizations(y, u, fs, orders)
+    out["Ua"] = block_projections(out["svd"][0], out["svd"][2], out["T_H"])
     return out
 
 
@@ -181,67 +172,19 @@ def run(n_records, structure="chain", seed=0, progress=True, max_seconds=None, s
     ``max_seconds``, stops after the record that crosses it (the arrays are cut to the records done)."""
     specs = specs_of() if specs is None else specs
     kw, orders = STRUCTURES[structure]
-    truth = simulate(N_SAMPLES, seed=record_seed(seed, 0), **kw)
-    nt = truth.frequency_hz.size
-    V = len(specs) + 2
-    M, O, R = len(METHODS), len(orders), n_records
-    nan = np.full((M, O, R, nt), np.nan)
-    res = {"f": nan.copy(), "xi": nan.copy(), "sigma": np.full((M, O, R, nt, V, 2), np.nan),
-           "k_star": np.zeros((M, R), int)}
-    t0 = time.perf_counter()
-    done = 0
-    for k in range(R):
-        sim = simulate(N_SAMPLES, seed=record_seed(seed, k), **kw)
-        for m, u in enumerate((None, sim.u)):
-            rec = record_sigmas(sim.y, u, sim.fs, orders, specs)
-            res["k_star"][m, k] = rec["k_star"]
-            for o, n in enumerate(orders):
-                md = rec[n]
-                idx = match_modes(md["f"], truth.frequency_hz)
-                for i in np.flatnonzero(idx >= 0):
-                    j = idx[i]
-                    res["f"][m, o, k, i], res["xi"][m, o, k, i] = md["f"][j], md["xi"][j]
-                    res["sigma"][m, o, k, i] = md["sigma"][j]
-        done = k + 1
-        if record_done(k, R, t0, progress, max_seconds):
-            break
-    for key in ("f", "xi", "sigma"):
-        res[key] = res[key][:, :, :done]
-    res["k_star"] = res["k_star"][:, :done]
+    res = run_records(n_records, kw, orders, seed, progress, max_seconds,
+                      lambda y, u, fs, orders: record_sigmas(y, u, fs, orders, specs), {"sigma": (len(specs) + 2, 2)})
     with np.errstate(divide="ignore", invalid="ignore"):
         res["rho"] = np.maximum(1.0, np.max(res["sigma"][..., -1, :] / res["sigma"][..., 0, :], axis=-1))
-    res["orders"] = np.array(orders)
     res["cs"] = np.array([c for _, c in specs])
     res["forms"] = np.array([form for form, _ in specs])
     res["structure"] = np.array(structure)
-    res["true_f"], res["true_xi"] = truth.frequency_hz, truth.damping_ratio
-    res["seconds"] = time.perf_counter() - t0
     return res
 
 
 def table(res):
     """stats[variant, method, order, mode, var] = (median, coverage, RMS z, n)."""
-    M, O, _, nt, V, _ = res["sigma"].shape
-    st = np.full((V, M, O, nt, 2, 4), np.nan)
-    for c in range(V):
-        for m in range(M):
-            for o in range(O):
-                for i in range(nt):
-                    keep = res["rho"][m, o, :, i] <= LIMIT
-                    for v, key in enumerate(("f", "xi")):
-                        x = np.where(keep, res[key][m, o, :, i], np.nan)
-                        st[c, m, o, i, v] = _stats(x, res["sigma"][m, o, :, i, c, v])
-    return st
-
-
-def pooled(st, c, o):
-    """Pooled over modes 2.., OO and IO, f and ξ: (cells in both bands, cells, worst coverage, RMS z range,
-    median range)."""
-    s = st[c, :, o, 1:, :, :]
-    med, cov, rz = s[..., 0].ravel(), s[..., 1].ravel(), s[..., 2].ravel()
-    ok = np.isfinite(med)
-    return (int(_in_band(med[ok], cov[ok]).sum()), int(ok.sum()), np.nanmin(cov), np.nanmin(rz), np.nanmax(rz),
-            np.nanmin(med), np.nanmax(med))
+    return variant_stats(res, [res["sigma"][..., c, :] for c in range(res["sigma"].shape[-2])])
 
 
 def true_order_change(res, names):
@@ -271,32 +214,8 @@ def report(res, columns=None):
         f"{meth}: " + ", ".join(f"{v}×{c}" for v, c in enumerate(b) if c) for meth, b in ks.items()))
     lines += true_order_change(res, names)
     lines.append("")
-    head = " | ".join(names[c] for c in sel)
-    for v, name in ((0, "f"), (1, "ξ")):
-        lines.append(f"**{name}**: median σ/σ_MC · coverage of ±1.96 σ · RMS z")
-        lines.append("")
-        lines.append(f"| method | order | mode | n | {head} |")
-        lines.append("|---|---|---|---|" + "---|" * len(sel))
-        for m, meth in enumerate(METHODS):
-            for o, n in enumerate(orders):
-                for i in range(nt):
-                    cells = [f"{st[c, m, o, i, v, 0]:.2f} · {st[c, m, o, i, v, 1]:.2f} · {st[c, m, o, i, v, 2]:.2f}"
-                             for c in sel]
-                    lines.append(f"| {meth} | {n} | {i + 1} | {int(st[0, m, o, i, v, 3])} | " + " | ".join(cells) + " |")
-        lines.append("")
-    lines.append(f"Pooled, modes 2–{nt}, OO and IO, f and ξ: cells in the bands (coverage "
-                 f"{COVERAGE_BAND[0]:.2f}–{COVERAGE_BAND[1]:.2f} and median {MEDIAN_BAND[0]:.2f}–{MEDIAN_BAND[1]:.2f}) "
-                 "/ cells; worst coverage; range of RMS z; range of the median σ/σ_MC")
-    lines.append("")
-    lines.append("| variant | " + " | ".join(f"order {n}" for n in orders) + " |")
-    lines.append("|---|" + "---|" * O)
-    for c, name in enumerate(names):
-        cells = []
-        for o in range(O):
-            inb, cnt, wc, lo, hi, mlo, mhi = pooled(st, c, o)
-            cells.append(f"{inb}/{cnt}; cov ≥ {wc:.2f}; RMS z {lo:.2f}–{hi:.2f}; median {mlo:.2f}–{mhi:.2f}")
-        lines.append(f"| {name} | " + " | ".join(cells) + " |")
-    lines.append("")
+    lines += per_mode_tables(st[sel], [names[c] for c in sel], orders, nt)
+    lines += pooled_table(st, names, orders, nt, "variant", with_median=True)
     return "\n".join(lines)
 
 
@@ -394,13 +313,13 @@ if __name__ == "__main__":
     ap.add_argument("--cs", type=float, nargs="*", default=list(CS), help="c of the saturating form")
     ap.add_argument("--tik-cs", type=float, nargs="*", default=[], help="c of the Tikhonov form (variant)")
     ap.add_argument("--max-seconds", type=float, help="stop after the record that crosses this wall time")
-    ap.add_argument("--check", action="store_true", help="run the checks (on --records records, default 3)")
+    ap.add_argument("--check", action="store_true", help="run the checks (on --records records; 3 unless given)")
     ap.add_argument("--columns", nargs="*", help="with --report: the variants of the per-mode tables (e.g. frozen c=10 plain)")
     args = ap.parse_args()
     if args.report:
         reprint(args.report, lambda res: report(res, args.columns))
     elif args.check:
-        checks(args.records if args.records != 100 else 3, args.structure, args.seed, args.form)
+        checks(args.records if "--records" in sys.argv else 3, args.structure, args.seed, args.form)
     else:
         main(args.records, args.structure, args.seed, args.out, max_seconds=args.max_seconds,
              specs=specs_of(args.cs, args.tik_cs))

@@ -110,21 +110,31 @@ def mean_phase_deviation(shape, cov=None) -> IndicatorValue:
     return IndicatorValue(float(r.value), float(r.std))
 
 
-def mac_test(shape_a, shape_b, cov_a=None, cov_b=None) -> MacTest:
-    """MAC of two independently estimated shapes (two records, two setups, or an estimate against
-    a fixed reference: leave that one's covariance ``None``) with its σ and the "same mode" test.
+def mac_test(shape_a, shape_b, cov_a=None, cov_b=None, cross_covariance=None) -> MacTest:
+    """MAC of two estimated shapes with its σ and the "same mode" test: two records, two setups, or
+    an estimate against a fixed reference (leave that one's covariance ``None``), taken as
+    independent; or two modes of ONE identification, which share the data, with their
+    ``cross_covariance``, the ``(2l, 2l)`` covariance of ``[Re a; Im a]`` with ``[Re b; Im b]``
+    (``V_a V_bᵀ`` of their shape factors, ``identify(..., keep_shape_factor=True)``).
 
     Both covariances ``None``: the MAC alone (σ and p-value NaN)."""
     a, b = _shape("shape_a", shape_a), _shape("shape_b", shape_b)
     if a.size != b.size:
         raise ValueError(f"shape_a and shape_b must have as many components; got {a.size} and {b.size}")
     if cov_a is None and cov_b is None:
+        if cross_covariance is not None:
+            raise ValueError("cross_covariance needs cov_a and cov_b")
         nan = float("nan")
         return MacTest(float(_core.modal_assurance(a, b)), nan, nan, nan, nan)
     zero = np.zeros((2 * a.size, 2 * a.size))
     ca = zero if cov_a is None else _cov("cov_a", cov_a, a.size)
     cb = zero if cov_b is None else _cov("cov_b", cov_b, b.size)
-    r = _core.modal_assurance_statistics(a, ca, b, cb)
+    if cross_covariance is None:
+        r = _core.modal_assurance_statistics(a, ca, b, cb)
+    else:
+        c = _cov("cross_covariance", cross_covariance, a.size)
+        joint = np.block([[ca, c], [c.T, cb]])
+        r = _core.modal_assurance_statistics_joint(a, b, 0.5 * (joint + joint.T))
     return MacTest(float(r.value), float(r.std), float(r.loss_at_maximum_mean), float(r.loss_at_maximum_std),
                    _loss_p_value(1.0 - float(r.value), float(r.loss_at_maximum_mean), float(r.loss_at_maximum_std)))
 

@@ -92,6 +92,27 @@ def test_std_equals_second_order_moments_from_numerical_derivatives(shapes):
     assert t.loss_std == pytest.approx(loss_std, rel=1e-4)
 
 
+def test_mac_test_with_a_cross_covariance_equals_the_second_order_moments_of_the_joint(shapes):
+    # two modes of one identification: their shapes' errors are correlated (a joint covariance F Fᵀ)
+    a, b, _ = shapes
+    F = np.random.default_rng(12).normal(size=(20, 30)) * 0.01
+    joint = F @ F.T
+    t = mac_test(a, b, joint[:10, :10], joint[10:, 10:], cross_covariance=joint[:10, 10:])
+    std, loss_mean, loss_std = second_order_numpy(
+        lambda z: mac_numpy(complexify(z[:10]), complexify(z[10:])), np.concatenate([realify(a), realify(b)]), joint)
+    assert t.std == pytest.approx(std, rel=1e-4)
+    assert t.loss_mean == pytest.approx(loss_mean, rel=1e-4) and t.loss_std == pytest.approx(loss_std, rel=1e-4)
+    # no cross-covariance is the independent test
+    independent = mac_test(a, b, joint[:10, :10], joint[10:, 10:])
+    zero = mac_test(a, b, joint[:10, :10], joint[10:, 10:], cross_covariance=np.zeros((10, 10)))
+    assert zero.std == pytest.approx(independent.std, rel=1e-12) and zero.p_value == pytest.approx(independent.p_value)
+    assert t.std != pytest.approx(independent.std, rel=1e-2)  # the correlation matters here
+    with pytest.raises(ValueError, match="cross_covariance"):
+        mac_test(a, b, cross_covariance=np.zeros((10, 10)))
+    with pytest.raises(ValueError, match="cross_covariance"):
+        mac_test(a, b, joint[:10, :10], joint[10:, 10:], cross_covariance=np.zeros((10, 8)))
+
+
 def test_same_mode_test_rejects_at_its_level_under_the_null(shapes):
     # two estimates of one (complex) shape with known covariances: the p-value is ~uniform
     a, _, cov = shapes

@@ -49,7 +49,8 @@ def test_every_study_is_smoke_tested():
                                            "split_halves_pool.py", "block_scaling_mc.py",
                                            "above_order_diagnosis.py", "partial_unfreeze_mc.py",
                                            "bootstrap_sigma_mc.py", "coupling_sketch.py", "selected_members_mc.py",
-                                           "diagram_shape_test.py", "regularized_gap_mc.py"}
+                                           "diagram_shape_test.py", "regularized_gap_mc.py",
+                                           "monitoring_shape_test.py"}
     assert scripts == tested
 
 
@@ -158,6 +159,18 @@ def test_above_order_diagnosis(capsys, tmp_path):
     H = np.random.default_rng(1).standard_normal((6, 4))
     assert np.allclose(study.jacobian_gamma_h(H, 3, frozen_from=2), study.oracle.jacobian_Gamma_H(H, 3, frozen_from=2))
     assert "| method | order | mode | n | (a) σ_core | (b) σ_trueH |" in capsys.readouterr().out
+
+
+def test_monitoring_shape_test(capsys):
+    study = _module("monitoring_shape_test")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        study.gate_or_alarm(n_records=24, damage_record=22)
+        p, ratios = study.rate_without_change(n_records=24)
+        full, diagonal = study.full_or_diagonal(n_records=3)
+    assert p.size > 0 and len(ratios) > 0 and full.shape == diagonal.shape and full.size > 0
+    out = capsys.readouterr().out
+    assert "wrong pairs" in out and "| full |" in out
 
 
 def test_regularized_gap_mc(capsys, tmp_path):

@@ -9,6 +9,7 @@ wing is imported when the command runs, not when the command line is built.
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 import warnings
 
@@ -103,13 +104,19 @@ def run(args) -> int:
               f"store's 'warnings' variable); the first: {warned[0].splitlines()[0]}", file=sys.stderr)
     alarms = result.alarms()
     if len(alarms):
-        print(f"\n{len(alarms)} alarms (record, mode, frequency, standardised changes, control statistic, the "
-              "shape test's p-value; 'f, xi' or 'shape': which test raised it):")
+        n = len(alarms)
+        print(f"\n{n} alarm{'s' if n != 1 else ''} (record, mode, frequency, standardised changes of f and xi and "
+              "their control statistic, the shape test's p-value; which test raised it):")
+
+        def number(x, fmt):  # a value the store lacks (no change test of f and xi) as "-"
+            return format(x, fmt) if math.isfinite(x) else "-"
+
         for row in alarms.head(30).itertuples():
             which = " and ".join(w for w, on in (("f, xi", row.frequency_damping_alarm), ("shape", row.shape_alarm))
                                  if on)
-            print(f"  {row.record}  mode {row.mode}  {row.frequency_hz:.4f} Hz  z_f {row.frequency_change:+.1f}  "
-                  f"z_xi {row.damping_change:+.1f}  {row.control:.1f}  p_shape {row.shape_p_value:.2g}  {which}")
+            print(f"  {row.record}  mode {row.mode}  {row.frequency_hz:.4f} Hz  "
+                  f"z_f {number(row.frequency_change, '+.1f')}  z_xi {number(row.damping_change, '+.1f')}  "
+                  f"{number(row.control, '.1f')}  p_shape {number(row.shape_p_value, '.2g')}  {which}")
         if len(alarms) > 30:
             print(f"  ... {len(alarms) - 30} more (the store's alarm and shape_alarm variables have them all)")
     for p in written:

@@ -34,7 +34,7 @@ from .change import change_test, miscalibrated
 from .executors import cancel_queued, executor_for
 from .parts import Parts, record_modes, store_lock
 from .records import covariate_matrix, record_tasks, record_times
-from .tracking import ReferenceModes, TrackingSettings, reference_period, track
+from .tracking import ReferenceModes, TrackingSettings, after_reference, reference_period, track
 from .worker import TaskConfig, process_record
 from .worker import settle_seconds as _settle_seconds
 
@@ -66,25 +66,38 @@ class Monitoring:
     def alarms(self):
         """The alarms as a table, one row per record and mode with an alarm of either test: record,
         time, mode, frequency_hz, frequency_change, damping_change (standardised), control (the
-        statistic), sigma_confirmed (False: the mode's σ is not confirmed by the reference period,
-        its alarms are more frequent than the rate stated), shape_p_value (the shape test against
-        the reference mode), and which test raised it: frequency_damping_alarm (the change test of
-        f and ξ), shape_alarm (the shape test)."""
+        statistic), sigma_confirmed (False: the mode's σ of f and ξ is not confirmed by the
+        reference period, its alarms are more frequent than the rate stated), shape_p_value (the
+        shape test against the reference mode), and which test raised it: frequency_damping_alarm
+        (the change test of f and ξ, an EWMA), shape_alarm (the shape test, each record on its own).
+        With nothing changed, each test raises alarms at ``false_alarm_rate`` per record and mode,
+        so a row of either comes at up to twice that rate. Without the change test of f and ξ (its
+        regression could not be made) its columns are NaN and only shape alarms are listed."""
         import pandas as pd
 
         columns = ["record", "time", "mode", "frequency_hz", "frequency_change", "damping_change", "control",
                    "sigma_confirmed", "shape_p_value", "frequency_damping_alarm", "shape_alarm"]
         ds = self.dataset
-        if ds.sizes["mode"] == 0 or "control" not in ds:
+        if ds.sizes["mode"] == 0:
             return pd.DataFrame(columns=columns)
-        df = ds[["frequency_hz", "frequency_change", "damping_change", "control", "alarm"]].to_dataframe()
+        n_rec, n_mode = ds.sizes["record"], ds.sizes["mode"]
+        k, j = (a.ravel() for a in np.indices((n_rec, n_mode)))  # rows: record-major, as the arrays below
+
+        def per_record_and_mode(name, fill=np.nan):
+            values = ds[name].transpose("record", "mode").values if name in ds else np.full((n_rec, n_mode), fill)
+            return values.ravel()
+
         shape_p, shape_alarm = _shape_test_of(ds)
-        df["shape_p_value"], df["shape_alarm"] = shape_p.ravel(), shape_alarm.ravel()
-        df = df.rename(columns={"alarm": "frequency_damping_alarm"})
-        df["frequency_damping_alarm"] = df["frequency_damping_alarm"].astype(bool)
-        df = df[df["frequency_damping_alarm"] | df["shape_alarm"]].reset_index()
-        df["sigma_confirmed"] = ds["sigma_confirmed"].sel(mode=df["mode"].values).values.astype(bool)
-        return df[columns]
+        confirmed = ds["sigma_confirmed"].values.astype(bool) if "sigma_confirmed" in ds else None
+        df = pd.DataFrame({
+            "record": ds["record"].values[k], "time": ds["time"].values[k], "mode": ds["mode"].values[j],
+            **{name: per_record_and_mode(name) for name in ("frequency_hz", "frequency_change", "damping_change",
+                                                            "control")},
+            "sigma_confirmed": pd.array(confirmed[j] if confirmed is not None else [pd.NA] * len(j), dtype="boolean"),
+            "shape_p_value": shape_p.ravel(),
+            "frequency_damping_alarm": per_record_and_mode("alarm", False).astype(bool),
+            "shape_alarm": shape_alarm.ravel()})
+        return df[df["frequency_damping_alarm"] | df["shape_alarm"]].reset_index(drop=True)[columns]
 
     def plot_frequencies(self, **kwargs):
         """Tracked frequencies against time with ±σ bands and the alarms marked (a Figure)."""
@@ -123,35 +136,33 @@ class Monitoring:
         ref = ds["in_reference"].values
         if "control" not in ds:  # tracked, but the change test could not be made
             lines.append(f"reference: {int(ref.sum())} records; {ds.attrs.get('tracking_error', '')}")
-            lines.append(" mode  f_ref [Hz]  found")
+            lines.append(" mode  f_ref [Hz]  found  shape alarms / tested")
             for j in range(ds.sizes["mode"]):
                 found = int(np.isfinite(ds["frequency_hz"].values[:, j]).sum())
-                lines.append(f" {j + 1:4d}  {ds['reference_frequency_hz'].values[j]:10.4f}  {found:5d}")
+                lines.append(f" {j + 1:4d}  {ds['reference_frequency_hz'].values[j]:10.4f}  {found:5d}  "
+                             f"{_shape_alarm_count(ds, j)}")
             return "\n".join(lines)
         limits = ds["control_limit"].values if "control_limit" in ds else np.zeros(0)
         shown = f"{np.nanmedian(limits):.2f}" if np.isfinite(limits).any() else "none"
         lines.append(f"reference: {int(ref.sum())} records; alarms at a false-alarm rate of "
                      f"{self.tracking.false_alarm_rate:g} per record and mode (median limit {shown}, "
                      f"EWMA weight {self.tracking.smoothing:g})")
-        lines.append(" mode  f_ref [Hz]  xi_ref [%]  found   reduced chi2 (f, xi)   alarms of the records tested"
-                     "   shape alarms")
+        lines.append(" mode  f_ref [Hz]  xi_ref [%]  found   reduced chi2 (f, xi)   f, xi alarms / tested   "
+                     "shape alarms / tested")
         after = ~ref & (ds["status"].values == "done")
         flagged, high = miscalibrated(ds["reference_reduced_chi2_frequency"].values,
                                       ds["reference_reduced_chi2_damping"].values, int(ref.sum()),
                                       ds.sizes.get("term", 1))
-        shape_p, shape_alarm = _shape_test_of(ds)
         for j in range(ds.sizes["mode"]):
             found = np.isfinite(ds["frequency_hz"].values[:, j])
             tested = after & np.isfinite(ds["control"].values[:, j])
             n_alarm = int(ds["alarm"].values[after, j].sum())
-            shape_tested = after & np.isfinite(shape_p[:, j])
-            n_shape = int(shape_alarm[after, j].sum())
             red = (ds["reference_reduced_chi2_frequency"].values[j], ds["reference_reduced_chi2_damping"].values[j])
             flag = " !" if flagged[j] else ""
             lines.append(f" {j + 1:4d}  {ds['reference_frequency_hz'].values[j]:10.4f}  "
                          f"{100 * ds['reference_damping_ratio'].values[j]:10.3f}  {int(found.sum()):5d}   "
                          f"{red[0]:9.2f} {red[1]:9.2f}{flag:2s}  {n_alarm:5d} of {int(tested.sum()):<14d}"
-                         f"{n_shape:5d} of {int(shape_tested.sum())}")
+                         f"{_shape_alarm_count(ds, j):>8s}")
         if flagged.any():
             lines.append(f" !: reduced chi2 above {high:.2f}, its 99.9 % quantile (see the note)")
         return "\n".join(lines)
@@ -161,8 +172,20 @@ def _shape_test_of(ds) -> tuple:
     """(shape_p_value, shape_alarm), each (record, mode), of a store; a store written before the
     shape test has neither: p-values unknown, no alarm."""
     if "shape_p_value" not in ds:
-        return np.full(ds["alarm"].shape, np.nan), np.zeros(ds["alarm"].shape, bool)
-    return ds["shape_p_value"].values, ds["shape_alarm"].values.astype(bool)
+        shape = (ds.sizes["record"], ds.sizes["mode"])
+        return np.full(shape, np.nan), np.zeros(shape, bool)
+    return (ds["shape_p_value"].transpose("record", "mode").values,
+            ds["shape_alarm"].transpose("record", "mode").values.astype(bool))
+
+
+def _shape_alarm_count(ds, j: int) -> str:
+    """``"a of t"``: mode ``j``'s shape alarms among the records after the reference period with a
+    shape test; ``"-"`` for a store written before the shape test."""
+    if "shape_p_value" not in ds:
+        return "-"
+    p, alarm = _shape_test_of(ds)
+    after = after_reference(ds["in_reference"].values)
+    return f"{int(alarm[after, j].sum())} of {int(np.isfinite(p[after, j]).sum())}"
 
 
 def monitor(records, *, out=None, settings: Settings | None = None, criteria: StabilityCriteria | None = None,

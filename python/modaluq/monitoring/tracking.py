@@ -18,10 +18,10 @@ every record's modes on the reference modes' axis (:class:`Tracks`), which the c
    forbidden; :func:`scipy.optimize.linear_sum_assignment` gives the cheapest one-to-one
    assignment. Unassigned modes stay with the record (``-1``).
 3. **The shape test** (:func:`shape_test`): each assigned mode's shape against its reference
-   mode's by the "same mode" test of two shapes (:func:`modaluq.indicators.mac_test`: is the MAC
-   consistent with 1 given both shapes' σ?), with the variances of the assignment's shape term.
-   Its p-value is kept per record and mode; below ``false_alarm_rate`` after the reference period
-   it is a **shape alarm**: the shape changed by more than its σ and the environment explain. The
+   mode's mean shape by the "same mode" test of two shapes (:func:`modaluq.indicators.mac_test`:
+   is the MAC consistent with 1 given both shapes' σ and the environmental scatter?). Its p-value
+   is kept per record and mode; below ``false_alarm_rate`` after the reference period it is a
+   **shape alarm**: the shape changed by more than its σ and the environment explain. The
    gate stays the fixed ``min_mac``: a damaged mode's shape is no longer "the same" within σ, and
    it must stay tracked (docs/monitoring.md §3).
 """
@@ -38,8 +38,8 @@ from ..checks import check_boolean, check_integer, check_real
 from ..indicators import MacTest, mac_test
 from ..stabilization import modal_assurance_criterion
 
-__all__ = ["RecordModes", "ReferenceModes", "Tracks", "TrackingSettings", "assign", "reference_modes",
-           "reference_period", "shape_test", "track"]
+__all__ = ["RecordModes", "ReferenceModes", "Tracks", "TrackingSettings", "after_reference", "assign",
+           "reference_modes", "reference_period", "shape_test", "track"]
 
 #: Variance floor of a shape component (the normalised component has σ = 0).
 SHAPE_VARIANCE_FLOOR = 1e-6
@@ -65,8 +65,9 @@ class TrackingSettings:
     reference_distance : float, default 0.05
         Clustering cut of the reference period's modes on |Δf|/f + (1 − MAC).
     false_alarm_rate : float, default 0.01
-        Probability of an alarm at one record and mode when nothing changed (of the change test of
-        f and ξ, and of the shape test).
+        Probability of an alarm at one record and mode when nothing changed, for each of the two
+        tests (the change test of f and ξ, the shape test): an alarm of either comes at up to twice
+        this rate.
     smoothing : float, default 0.3
         EWMA weight of the newest record in the control statistic (1: each record on its own).
     inflate_to_reference : bool, default False
@@ -154,6 +155,11 @@ class ReferenceModes:
     damping_scatter: np.ndarray        #: (k,) the same for ξ
     mode_shape_scatter: np.ndarray     #: (l, k) the same per shape component
     presence: np.ndarray               #: (k,) fraction of the reference records with the mode
+    #: (l, k) complex: the mean of the reference records' shapes, each scaled onto ``mode_shape``
+    #: (the shape test's reference: its error is σ/√K, not one record's)
+    mode_shape_mean: np.ndarray
+    #: (l, k) |σ| of a component of ``mode_shape_mean``: √(mean σ² / K) over its K records
+    mode_shape_mean_std: np.ndarray
 
     @property
     def n_modes(self) -> int:
@@ -218,14 +224,16 @@ def reference_modes(records: list, settings: TrackingSettings | None = None) -> 
             aligned.append(a)
             stds.append(scale * np.hypot(records[k].mode_shape_std_real[:, i], records[k].mode_shape_std_imag[:, i]))
         aligned, stds = np.array(aligned), np.array(stds)
-        shape_var = np.abs(aligned - aligned.mean(axis=0)) ** 2
+        mean_shape = aligned.mean(axis=0)
+        shape_var = np.abs(aligned - mean_shape) ** 2
         shape_extra = (shape_var.sum(axis=0) / max(len(members) - 1, 1)
                        - (np.nanmean(stds**2, axis=0) if np.any(np.isfinite(stds)) else 0.0))
         out.append(dict(f=np.median(fk), xi=np.median(xk), sf=np.nanmedian(sfk) if np.any(np.isfinite(sfk)) else np.nan,
                         sx=np.nanmedian(sxk) if np.any(np.isfinite(sxk)) else np.nan, phi=phi,
                         phi_std=np.nanmedian(stds, axis=0) if np.any(np.isfinite(stds)) else np.full(l, np.nan),
                         f_env=_excess_std(fk, sfk), x_env=_excess_std(xk, sxk),
-                        phi_env=np.sqrt(np.maximum(shape_extra, 0.0)), presence=presence))
+                        phi_env=np.sqrt(np.maximum(shape_extra, 0.0)), presence=presence, phi_mean=mean_shape,
+                        phi_mean_std=np.sqrt(np.mean(stds**2, axis=0) / len(members))))
     if not out:
         raise ValueError(f"no mode was selected in at least {s.min_presence:.0%} of the {len(records)} reference "
                          "records (lower min_presence, or check the records' selection)")
@@ -237,7 +245,9 @@ def reference_modes(records: list, settings: TrackingSettings | None = None) -> 
         mode_shape_std=np.stack([m["phi_std"] for m in out], axis=1),
         frequency_scatter=np.array([m["f_env"] for m in out]), damping_scatter=np.array([m["x_env"] for m in out]),
         mode_shape_scatter=np.stack([m["phi_env"] for m in out], axis=1),
-        presence=np.array([m["presence"] for m in out]))
+        presence=np.array([m["presence"] for m in out]),
+        mode_shape_mean=np.stack([m["phi_mean"] for m in out], axis=1),
+        mode_shape_mean_std=np.stack([m["phi_mean_std"] for m in out], axis=1))
 
 
 def assignment_cost(modes: RecordModes, ref: ReferenceModes) -> tuple:
@@ -269,18 +279,27 @@ def assignment_cost(modes: RecordModes, ref: ReferenceModes) -> tuple:
 
 
 def shape_test(modes: RecordModes, i: int, ref: ReferenceModes, j: int) -> MacTest:
-    """The "same mode" test of record mode ``i``'s shape against reference mode ``j``'s
-    (:func:`modaluq.indicators.mac_test`), with the variances of :func:`assignment_cost`'s shape
-    term: the record's σ of each component's real and imaginary part, and for the reference its
-    σ and environmental scatter (both per component, split evenly between the real and imaginary
-    parts). Correlations between channels are not kept in the records' parts and are left out.
-    The p-value is NaN when a σ is unknown."""
+    """The "same mode" test of record mode ``i``'s shape against reference mode ``j``'s mean shape
+    (:func:`modaluq.indicators.mac_test`). Variances: the record's σ of each component's real and
+    imaginary part; for the reference, the σ of its mean over the K reference records and the
+    environmental scatter, both per component and split evenly between the real and imaginary
+    parts. The mean, not one record's shape: a single reference estimate's error would be shared
+    by every later record, so that one campaign's alarms would come together (its rate only right
+    on average over campaigns). Correlations between channels are not kept in the records' parts
+    and are left out. The p-value is NaN when a σ is unknown."""
     record_var = np.concatenate([modes.mode_shape_std_real[:, i], modes.mode_shape_std_imag[:, i]]) ** 2
-    half = 0.5 * (ref.mode_shape_std[:, j] ** 2 + ref.mode_shape_scatter[:, j] ** 2)
+    half = 0.5 * (ref.mode_shape_mean_std[:, j] ** 2 + ref.mode_shape_scatter[:, j] ** 2)
     if not (np.all(np.isfinite(record_var)) and np.all(np.isfinite(half))):
-        return mac_test(modes.mode_shape[:, i], ref.mode_shape[:, j])
-    return mac_test(modes.mode_shape[:, i], ref.mode_shape[:, j], np.diag(record_var),
+        return mac_test(modes.mode_shape[:, i], ref.mode_shape_mean[:, j])
+    return mac_test(modes.mode_shape[:, i], ref.mode_shape_mean[:, j], np.diag(record_var),
                     np.diag(np.concatenate([half, half])))
+
+
+def after_reference(in_reference) -> np.ndarray:
+    """(n_records,) bool: the records after the reference period began and not in it, those the
+    change tests chart (a record before a ``reference_span`` is not tested)."""
+    in_reference = np.asarray(in_reference, bool)
+    return ~in_reference & (np.cumsum(in_reference) > 0)
 
 
 def assign(modes: RecordModes, ref: ReferenceModes, settings: TrackingSettings | None = None) -> tuple:
@@ -329,7 +348,7 @@ class Tracks:
     mac_to_reference: np.ndarray
     mac_to_reference_std: np.ndarray   #: σ of the MAC to the reference mode (second order, :func:`shape_test`)
     shape_p_value: np.ndarray          #: p-value of the "same mode" test of the shape (:func:`shape_test`)
-    shape_alarm: np.ndarray            #: bool: after the reference period, ``shape_p_value < false_alarm_rate``
+    shape_alarm: np.ndarray            #: bool: ``shape_p_value < false_alarm_rate`` after the reference period
     assignment_distance: np.ndarray    #: Mahalanobis distance² to the reference mode
     mode_shape: np.ndarray             #: complex
     mode_shape_std_real: np.ndarray
@@ -402,7 +421,7 @@ def track(modes: list, in_reference: np.ndarray, n_channels: int, settings: Trac
             SH[k, :, j] = mk.mode_shape[:, i]
             SHR[k, :, j], SHI[k, :, j] = mk.mode_shape_std_real[:, i], mk.mode_shape_std_imag[:, i]
     with np.errstate(invalid="ignore"):  # NaN: no test, no alarm
-        shape_alarm = (P_SHAPE < s.false_alarm_rate) & ~np.asarray(in_reference, bool)[:, None]
+        shape_alarm = (P_SHAPE < s.false_alarm_rate) & after_reference(in_reference)[:, None]
     return Tracks(reference=ref, error=error, in_reference=in_reference, index=tuple(index), frequency_hz=F,
                   damping_ratio=XI, frequency_std=SF, damping_std=SX, frequency_damping_correlation=RHO,
                   mac_to_reference=MAC, mac_to_reference_std=MAC_STD, shape_p_value=P_SHAPE,

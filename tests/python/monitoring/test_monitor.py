@@ -13,6 +13,8 @@ from monitoring_support import SETTINGS
 
 import modaluq
 from modaluq.monitoring import TrackingSettings, load_tracks, monitor, record_files, time_from_name
+from modaluq.monitoring.plot import plot_tracked_frequencies
+from modaluq.monitoring.store import COMPLEX_SHAPES
 
 pytest.importorskip("xarray")
 
@@ -353,14 +355,36 @@ def test_the_summary_is_what_a_notebook_shows_and_alarms_carry_the_modes_calibra
         assert row["shape_p_value"] == pytest.approx(float(ds["shape_p_value"].sel(at)), nan_ok=True)
 
 
-def test_a_store_written_before_the_shape_test_still_gives_its_summary_and_alarms(serial):
-    old = dataclasses.replace(serial, dataset=serial.dataset.drop_vars(["shape_p_value", "shape_alarm",
-                                                                         "mac_to_reference_std"]))
+def test_a_store_written_before_the_shape_test_still_gives_its_summary_alarms_and_plot(serial, tmp_path):
+    path = tmp_path / "old.nc"  # a store as modaluq wrote it before the shape test
+    serial.dataset.drop_vars(["shape_p_value", "shape_alarm", "mac_to_reference_std",
+                              *COMPLEX_SHAPES]).to_netcdf(path)  # complex shapes as their parts, as store.write
+    old = dataclasses.replace(serial, dataset=load_tracks(path))
     alarms = old.alarms()
     assert len(alarms) == int(serial.dataset["alarm"].values.sum())  # the change test's alarms only
     assert not alarms["shape_alarm"].any() and alarms["shape_p_value"].isna().all()
     assert alarms["frequency_damping_alarm"].all()
-    assert "shape alarms" in old.summary() and " 0 of 0" in old.summary()
+    rows = old.summary(notes=False).splitlines()[3:3 + serial.dataset.sizes["mode"]]
+    assert rows and all(r.rstrip().endswith(" -") for r in rows), rows  # "-": no shape test in this store
+    plot_tracked_frequencies(old.dataset).savefig(tmp_path / "old.png")
+
+
+def test_without_the_change_test_the_shape_alarms_are_still_listed(serial):
+    # the regression of f and ξ could not be made (e.g. a covariate constant over the reference):
+    # the store has no control statistic, but the shapes were tested
+    ds = serial.dataset.drop_vars(["control", "control_limit", "frequency_change", "damping_change", "chi2",
+                                   "sigma_confirmed", "alarm"], errors="ignore").copy(deep=True)
+    flags = ds["shape_alarm"].transpose("record", "mode").values
+    flags[:] = False
+    flags[-3:, 0] = True  # three shape alarms of mode 1
+    ds["shape_alarm"] = (("record", "mode"), flags)
+    m = dataclasses.replace(serial, dataset=ds)
+    alarms = m.alarms()
+    assert alarms["record"].tolist() == list(ds["record"].values[-3:]) and alarms["mode"].tolist() == [1, 1, 1]
+    assert alarms["shape_alarm"].all() and not alarms["frequency_damping_alarm"].any()
+    assert alarms[["frequency_change", "damping_change", "control"]].isna().all().all()
+    assert alarms["sigma_confirmed"].isna().all()
+    assert "3 of " in m.summary(notes=False).splitlines()[3]  # mode 1's row counts them
 
 
 def test_a_single_record_and_simulated_files_and_objects_name_their_channels_alike(campaign, tmp_path):

@@ -84,12 +84,14 @@ def test_a_three_sigma_stiffness_loss_raises_the_alarm_in_nine_records_of_ten(no
 
 def test_a_stiffness_loss_that_moves_a_shape_raises_its_shape_alarm():
     # spring 3 loses 10 %: mode 3 (8.7 Hz) changes shape (its MAC to the reference stays > 0.99,
-    # far above the gate) and the shape test sees it in nearly every record after
+    # far above the gate) and the shape test sees it in nearly every record after (the target of
+    # docs/monitoring.md §3: >= 90 %)
     camp = simulate_monitoring(60, n_samples=10_000, seed=1, damage_element=2, damage_record=40, damage_fraction=0.1)
     d = monitor(camp.records, settings=SETTINGS, progress=False).dataset
     assert np.nanmin(d["mac_to_reference"].values[40:, 2]) > 0.99
     assert d["shape_alarm"].values[40:, 2].mean() >= 0.9, d["shape_alarm"].values[40:, 2].mean()
-    assert d["shape_alarm"].values[20:40].sum() <= 2  # before it, the rate stated (120 tests at 1 %)
+    # before it, the rate stated: 120 tests at 1 %, within the binomial 99.9 % bound
+    assert d["shape_alarm"].values[20:40].sum() <= scipy.stats.binom.isf(0.001, 120, 0.01)
 
 
 def test_tracks_of_modes_two_percent_apart_do_not_swap():

@@ -12,6 +12,7 @@ from modaluq.indicators import mac_test
 from modaluq.monitoring.tracking import (
     RecordModes,
     TrackingSettings,
+    after_reference,
     assign,
     reference_modes,
     reference_period,
@@ -141,42 +142,71 @@ def gaussian_record(rng, changed=None):
                        mode_shape_std_real=std, mode_shape_std_imag=std.copy())
 
 
-def test_the_shape_test_is_the_same_mode_test_with_the_assignments_variances():
+def test_the_shape_test_is_the_same_mode_test_against_the_reference_mean():
+    # reference records whose shapes are exact (a random phase each) with a stated σ: their mean,
+    # brought onto one phase, is the true shape; its σ is σ/√K; the scatter beyond σ is 0
     rng = np.random.default_rng(5)
-    ref = reference_modes([record(rng, drift=0.004 * rng.standard_normal()) for _ in range(20)])
-    rec = record(rng)
-    # by hand: the record's σ of each part; the reference's σ and scatter, half to each part
-    half = 0.5 * (ref.mode_shape_std[:, 2] ** 2 + ref.mode_shape_scatter[:, 2] ** 2)
-    by_hand = mac_test(rec.mode_shape[:, 2], ref.mode_shape[:, 2],
-                       np.diag(np.r_[rec.mode_shape_std_real[:, 2], rec.mode_shape_std_imag[:, 2]] ** 2),
-                       np.diag(np.r_[half, half]))
-    assert shape_test(rec, 2, ref, 2) == by_hand
-    assert 0 < by_hand.p_value < 1 and by_hand.std > 0
+    exact = [RecordModes(**{**gaussian_record(rng).__dict__,
+                            "mode_shape": SHAPES * np.exp(1j * rng.uniform(0, 2 * np.pi, 4))}) for _ in range(20)]
+    ref = reference_modes(exact)
+    mac_to_truth = np.abs(np.sum(ref.mode_shape_mean.conj() * SHAPES, axis=0)) ** 2 / (
+        np.sum(np.abs(ref.mode_shape_mean) ** 2, axis=0) * np.sum(np.abs(SHAPES) ** 2, axis=0))
+    np.testing.assert_allclose(mac_to_truth, 1.0, atol=1e-12)
+    np.testing.assert_allclose(ref.mode_shape_mean_std, np.hypot(SHAPE_STD, SHAPE_STD) / np.sqrt(20), rtol=1e-12)
+    assert np.all(ref.mode_shape_scatter == 0)
+    rec = gaussian_record(rng)
+    half = SHAPE_STD**2 / 20  # the mean's σ², half to each part
+    expected = mac_test(rec.mode_shape[:, 2], SHAPES[:, 2], np.eye(6) * SHAPE_STD**2, np.eye(6) * half)
+    got = shape_test(rec, 2, ref, 2)
+    assert got.mac == pytest.approx(expected.mac, abs=1e-12) and got.p_value == pytest.approx(expected.p_value, rel=1e-9)
+    assert 0 < got.p_value < 1 and got.std > 0
     # a σ unknown: the MAC alone, no p-value (no alarm can follow)
     blind = RecordModes(**{**rec.__dict__, "mode_shape_std_real": np.full((3, 4), np.nan)})
     t = shape_test(blind, 2, ref, 2)
-    assert t.mac == by_hand.mac and np.isnan(t.p_value) and np.isnan(t.std)
+    assert t.mac == got.mac and np.isnan(t.p_value) and np.isnan(t.std)
 
 
-def test_shape_alarms_keep_the_rate_without_change_and_fire_when_a_shape_moves():
+def test_shape_alarms_keep_the_rate_in_each_campaign_and_fire_when_a_shape_moves():
+    # 12 independent campaigns of 20 reference and 50 later records, shape errors exactly as σ
+    # states: the mean rate of shape alarms is the rate stated, and its spread over the campaigns is
+    # the binomial one (the reference's error, shared by a campaign's records, is that of a mean)
+    rate, n_ref, n_after = 0.05, 20, 50
+    rates = []
+    for seed in range(12):
+        rng = np.random.default_rng(100 + seed)
+        records = [gaussian_record(rng) for _ in range(n_ref + n_after)]
+        tracks = track(records, np.arange(n_ref + n_after) < n_ref, 3, TrackingSettings(false_alarm_rate=rate))
+        assert not tracks.shape_alarm[:n_ref].any()  # never in the reference period
+        assert np.array_equal(tracks.shape_alarm[n_ref:], tracks.shape_p_value[n_ref:] < rate)
+        rates.append(tracks.shape_alarm[n_ref:].mean())
+    rates, dof = np.array(rates), len(rates) - 1
+    # the mean of the campaigns' rates: Student's t with their own spread, 99.9 % two-sided
+    assert abs(rates.mean() - rate) < scipy.stats.t.isf(0.0005, dof) * rates.std(ddof=1) / np.sqrt(len(rates)), \
+        rates.mean()
+    # their spread is a binomial's (200 tests each): the sample variance below its χ² 99.9 % quantile
+    binomial_var = rate * (1 - rate) / (n_after * 4)
+    assert rates.var(ddof=1) < binomial_var * scipy.stats.chi2.isf(0.001, dof) / dof, (rates.var(ddof=1), binomial_var)
+    # mode 4's second component moved by 10 σ (9.7 σ of the difference with the reference mean): its
+    # MAC stays far above the gate (0.8), the test sees it
     rng = np.random.default_rng(6)
-    n_ref, n_after = 20, 300
-    records = [gaussian_record(rng) for _ in range(n_ref + n_after)]
-    rate = 0.05
-    tracks = track(records, np.arange(len(records)) < n_ref, 3, TrackingSettings(false_alarm_rate=rate))
-    assert not tracks.shape_alarm[:n_ref].any()  # never in the reference period
-    assert np.array_equal(tracks.shape_alarm[n_ref:], tracks.shape_p_value[n_ref:] < rate)
-    # errors exactly as σ states: the rate stated, within the binomial 99.9 % bounds of 1200 tests
-    n = tracks.shape_p_value[n_ref:].size
-    k = int(tracks.shape_alarm.sum())
-    assert scipy.stats.binom.ppf(0.0005, n, rate) <= k <= scipy.stats.binom.isf(0.0005, n, rate), (k, n * rate)
-    # mode 4's second component moved by 10 σ (7 σ of the difference with the reference): its MAC
-    # stays far above the gate (0.8), the test sees it
+    reference = [gaussian_record(rng) for _ in range(n_ref)]
     moved = [gaussian_record(rng, changed=(3, 1, 10 * SHAPE_STD)) for _ in range(50)]
-    tracks = track(records[:n_ref] + moved, np.arange(n_ref + 50) < n_ref, 3, TrackingSettings(false_alarm_rate=rate))
+    tracks = track(reference + moved, np.arange(n_ref + 50) < n_ref, 3, TrackingSettings(false_alarm_rate=rate))
     assert np.all(tracks.mac_to_reference[n_ref:, 3] > 0.95)
     assert tracks.shape_alarm[n_ref:, 3].mean() >= 0.9, tracks.shape_alarm[n_ref:, 3].mean()
     assert tracks.shape_alarm[n_ref:, :3].mean() <= 0.15
+
+
+def test_no_shape_alarm_before_a_reference_span():
+    rng = np.random.default_rng(7)
+    before = [gaussian_record(rng, changed=(3, 1, 10 * SHAPE_STD)) for _ in range(5)]  # moved, but before it
+    records = before + [gaussian_record(rng) for _ in range(25)]
+    in_reference = np.zeros(30, bool)
+    in_reference[5:25] = True
+    tracks = track(records, in_reference, 3)
+    assert np.all(tracks.shape_p_value[:5, 3] < 1e-3)  # the test sees the moved shape ...
+    assert not tracks.shape_alarm[:25].any()  # ... but a record before the reference period is not charted
+    np.testing.assert_array_equal(after_reference(in_reference), np.arange(30) >= 25)
 
 
 def test_the_reference_period_takes_identified_records_only():
