@@ -44,15 +44,16 @@ def _tracked_mode(ds, k: int, j: int):
                        mode_shape_std_real=std["real"], mode_shape_std_imag=std["imag"])
 
 
-def gate_or_alarm(n_records=120, damage_record=84, seed=3):
-    camp = simulate_monitoring(n_records, n_samples=20_000, seed=seed, damage_element=2,
+def gate_or_alarm(n_records=120, damage_record=84, seed=3, n_samples=20_000):
+    camp = simulate_monitoring(n_records, n_samples=n_samples, seed=seed, damage_element=2,
                                damage_record=damage_record, damage_fraction=0.1)
     m = monitor(camp.records, progress=False, threads=1)
     ds = m.dataset
     after = ~ds["in_reference"].values
     before = after & (np.arange(n_records) < damage_record)
     p = ds["shape_p_value"].values
-    print(f"\n1. {n_records} hourly records of 400 s, spring 3 loses 10 % from record {damage_record}; the test at 1 %")
+    print(f"\n1. {n_records} hourly records of {n_samples / camp.fs:g} s, spring 3 loses 10 % from record "
+          f"{damage_record}; the test at 1 %")
     print("| mode | f [Hz] | rejected before | rejected after | smallest MAC to the reference after |")
     print("|---|---|---|---|---|")
     for j in range(ds.sizes["mode"]):
@@ -76,14 +77,14 @@ def gate_or_alarm(n_records=120, damage_record=84, seed=3):
           f"{n_gate} ({100 * n_gate / n_wrong:.1f} %); accepted by the test at 1 %: {n_test}")
 
 
-def rate_without_change(n_records=200, seed=0):
-    camp = simulate_monitoring(n_records, n_samples=10_000, seed=seed)
+def rate_without_change(n_records=200, seed=0, n_samples=10_000):
+    camp = simulate_monitoring(n_records, n_samples=n_samples, seed=seed)
     m = monitor(camp.records, settings=modaluq.Settings(orders=tuple(range(2, 25, 2))), progress=False, threads=1)
     ds = m.dataset
     after = ~ds["in_reference"].values
     p = ds["shape_p_value"].values[after]
-    print(f"\n2. {n_records} records of 200 s without damage (orders 2-24), {np.isfinite(p).sum()} tests after the "
-          "reference period: share below")
+    print(f"\n2. {n_records} records of {n_samples / camp.fs:g} s without damage (orders 2-24), {np.isfinite(p).sum()} "
+          "tests after the reference period: share below")
     print("| " + " | ".join(f"{a:g}" for a in ALPHAS) + " |\n|" + "---|" * len(ALPHAS))
     print("| " + " | ".join(f"{100 * np.nanmean(p < a):.2f} %" for a in ALPHAS) + " |")
     # observed 1 - MAC against the mean the test expects, per mode
@@ -96,12 +97,12 @@ def rate_without_change(n_records=200, seed=0):
     return p, ratios
 
 
-def full_or_diagonal(n_records=120):
+def full_or_diagonal(n_records=120, n_samples=10_000):
     sel = []
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", modaluq.ModalUQWarning)
         for k in range(n_records):
-            sim = modaluq.simulate(10_000, seed=100 + k)
+            sim = modaluq.simulate(n_samples, seed=100 + k)
             sel.append(modaluq.identify(sim.y, fs=sim.fs, orders=range(2, 25, 2)).select_modes())
     ref = sel[0]
     full, diagonal = [], []
@@ -114,8 +115,8 @@ def full_or_diagonal(n_records=120):
             full.append(mac_test(s.mode_shape[:, i], ref.mode_shape[:, j], ca, cb).p_value)
             diagonal.append(mac_test(s.mode_shape[:, i], ref.mode_shape[:, j], np.diag(np.diag(ca)),
                                      np.diag(np.diag(cb))).p_value)
-    print(f"\n3. {n_records} records of the paper's chain (200 s, orders 2-24, output-only), each mode against "
-          f"record 0's: {len(full)} tests, share below")
+    print(f"\n3. {n_records} records of the paper's chain ({n_samples / 50:g} s, orders 2-24, output-only), each mode "
+          f"against record 0's: {len(full)} tests, share below")
     print("| covariances | " + " | ".join(f"{a:g}" for a in ALPHAS) + " |\n|---|" + "---|" * len(ALPHAS))
     for label, p in (("full", full), ("diagonal", diagonal)):
         print(f"| {label} | " + " | ".join(f"{100 * np.nanmean(np.array(p) < a):.1f} %" for a in ALPHAS) + " |")

@@ -165,9 +165,9 @@ def test_monitoring_shape_test(capsys):
     study = _module("monitoring_shape_test")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        study.gate_or_alarm(n_records=24, damage_record=22)
-        p, ratios = study.rate_without_change(n_records=24)
-        full, diagonal = study.full_or_diagonal(n_records=3)
+        study.gate_or_alarm(n_records=23, damage_record=21, n_samples=5000)
+        p, ratios = study.rate_without_change(n_records=23, n_samples=5000)
+        full, diagonal = study.full_or_diagonal(n_records=3, n_samples=5000)
     assert p.size > 0 and len(ratios) > 0 and full.shape == diagonal.shape and full.size > 0
     out = capsys.readouterr().out
     assert "wrong pairs" in out and "| full |" in out
