@@ -137,10 +137,11 @@ class Monitoring:
         if "control" not in ds:  # tracked, but the change test could not be made
             lines.append(f"reference: {int(ref.sum())} records; {ds.attrs.get('tracking_error', '')}")
             lines.append(" mode  f_ref [Hz]  found  shape alarms / tested")
+            shape_counts = _shape_alarm_counts(ds)
             for j in range(ds.sizes["mode"]):
                 found = int(np.isfinite(ds["frequency_hz"].values[:, j]).sum())
                 lines.append(f" {j + 1:4d}  {ds['reference_frequency_hz'].values[j]:10.4f}  {found:5d}  "
-                             f"{_shape_alarm_count(ds, j)}")
+                             f"{shape_counts[j]}")
             return "\n".join(lines)
         limits = ds["control_limit"].values if "control_limit" in ds else np.zeros(0)
         shown = f"{np.nanmedian(limits):.2f}" if np.isfinite(limits).any() else "none"
@@ -153,6 +154,7 @@ class Monitoring:
         flagged, high = miscalibrated(ds["reference_reduced_chi2_frequency"].values,
                                       ds["reference_reduced_chi2_damping"].values, int(ref.sum()),
                                       ds.sizes.get("term", 1))
+        shape_counts = _shape_alarm_counts(ds)
         for j in range(ds.sizes["mode"]):
             found = np.isfinite(ds["frequency_hz"].values[:, j])
             tested = after & np.isfinite(ds["control"].values[:, j])
@@ -162,7 +164,7 @@ class Monitoring:
             lines.append(f" {j + 1:4d}  {ds['reference_frequency_hz'].values[j]:10.4f}  "
                          f"{100 * ds['reference_damping_ratio'].values[j]:10.3f}  {int(found.sum()):5d}   "
                          f"{red[0]:9.2f} {red[1]:9.2f}{flag:2s}  {n_alarm:5d} of {int(tested.sum()):<14d}"
-                         f"{_shape_alarm_count(ds, j):>8s}")
+                         f"{shape_counts[j]:>8s}")
         if flagged.any():
             lines.append(f" !: reduced chi2 above {high:.2f}, its 99.9 % quantile (see the note)")
         return "\n".join(lines)
@@ -178,14 +180,14 @@ def _shape_test_of(ds) -> tuple:
             ds["shape_alarm"].transpose("record", "mode").values.astype(bool))
 
 
-def _shape_alarm_count(ds, j: int) -> str:
-    """``"a of t"``: mode ``j``'s shape alarms among the records after the reference period with a
+def _shape_alarm_counts(ds) -> list:
+    """Per mode ``"a of t"``: its shape alarms among the records after the reference period with a
     shape test; ``"-"`` for a store written before the shape test."""
     if "shape_p_value" not in ds:
-        return "-"
+        return ["-"] * ds.sizes["mode"]
     p, alarm = _shape_test_of(ds)
     after = after_reference(ds["in_reference"].values)
-    return f"{int(alarm[after, j].sum())} of {int(np.isfinite(p[after, j]).sum())}"
+    return [f"{int(alarm[after, j].sum())} of {int(np.isfinite(p[after, j]).sum())}" for j in range(p.shape[1])]
 
 
 def monitor(records, *, out=None, settings: Settings | None = None, criteria: StabilityCriteria | None = None,

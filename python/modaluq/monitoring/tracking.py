@@ -233,7 +233,8 @@ def reference_modes(records: list, settings: TrackingSettings | None = None) -> 
                         phi_std=np.nanmedian(stds, axis=0) if np.any(np.isfinite(stds)) else np.full(l, np.nan),
                         f_env=_excess_std(fk, sfk), x_env=_excess_std(xk, sxk),
                         phi_env=np.sqrt(np.maximum(shape_extra, 0.0)), presence=presence, phi_mean=mean_shape,
-                        phi_mean_std=np.sqrt(np.mean(stds**2, axis=0) / len(members))))
+                        phi_mean_std=np.sqrt(np.nanmean(stds**2, axis=0) / len(members)) if np.any(np.isfinite(stds))
+                        else np.full(l, np.nan)))
     if not out:
         raise ValueError(f"no mode was selected in at least {s.min_presence:.0%} of the {len(records)} reference "
                          "records (lower min_presence, or check the records' selection)")
