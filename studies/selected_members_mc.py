@@ -35,6 +35,12 @@ VARIANTS = {"default": None, "no order check": ClusteringSettings(order_discrepa
             "mean": ClusteringSettings(cluster_std="mean"), "lowest": ClusteringSettings(representative="lowest")}
 
 
+def nearest_mode(sel, f0):
+    """The selected mode nearest the true frequency ``f0`` within 2 %, or None."""
+    j = np.flatnonzero(np.abs(sel.frequency_hz / f0 - 1) < 0.02)
+    return None if not j.size else int(j[np.argmin(np.abs(sel.frequency_hz[j] - f0))])
+
+
 def _mode_rows(res, truth):
     """Per true mode: a dict of each variant's (f, σ_f, ξ, σ_ξ) and the default's cluster members."""
     d = res.stabilization_diagram()
@@ -43,10 +49,9 @@ def _mode_rows(res, truth):
     for f0 in truth:
         row = {}
         for v, sel in sels.items():
-            j = np.flatnonzero(np.abs(sel.frequency_hz / f0 - 1) < 0.02)
-            if not j.size:
+            j = nearest_mode(sel, f0)
+            if j is None:
                 continue
-            j = j[np.argmin(np.abs(sel.frequency_hz[j] - f0))]
             row[v] = (sel.frequency_hz[j], sel.frequency_std[j], sel.damping_ratio[j], sel.damping_std[j])
             if v == "default":
                 row["widened"] = bool(sel.order_discrepancy[j])
@@ -103,13 +108,16 @@ def _cells(values, sigmas):
     return np.median(s) / std, np.mean(np.abs(z) <= 1.96), np.sqrt(np.mean(z ** 2))
 
 
-def tables(data) -> dict:
-    """{configuration: {variant: [(cells of f, cells of ξ) per true mode]}} from a run's data."""
+def tables(data, variants=None, spread=True) -> dict:
+    """{configuration: {variant: [(cells of f, cells of ξ) per true mode]}} from a run's data
+    (``variants``: the selections kept, default this study's; ``spread``: with the candidate of
+    :func:`spread_candidate`)."""
+    variants = list(VARIANTS if variants is None else variants) + (["√(σ² + spread²)"] if spread else [])
     out = {}
     for name, recs in data["records"].items():
         table = {}
         for m in range(len(data["truth"])):
-            for v in list(VARIANTS) + ["√(σ² + spread²)"]:
+            for v in variants:
                 rows = [r[m] for r in recs if ("default" if v.startswith("√") else v) in r[m]]
                 if len(rows) < 3:
                     continue
@@ -123,19 +131,24 @@ def tables(data) -> dict:
     return out
 
 
+def print_table(structure, name, n_records, table):
+    """A configuration's table: per selection, each true mode's cells of f and of ξ, and the cells in
+    both bands with the worst coverage."""
+    print(f"\n{structure} {name}, {n_records} records: median σ/σ_MC · coverage · RMS z per mode, f | ξ")
+    for lab, cells in table.items():
+        fs = ", ".join("{:.2f}·{:.2f}·{:.2f}".format(*c[0]) for c in cells)
+        xs = ", ".join("{:.2f}·{:.2f}·{:.2f}".format(*c[1]) for c in cells)
+        inband = sum((0.85 <= c[i][0] <= 1.18) and (0.93 <= c[i][1] <= 0.97) for c in cells for i in (0, 1))
+        cov = min(c[i][1] for c in cells for i in (0, 1))
+        print(f"| {lab} | {fs} | {xs} | {inband}/{2 * len(cells)}, cov ≥ {cov:.2f} |")
+
+
 def report(paths):
     for path in paths:
         with open(path, "rb") as fh:
             data = pickle.load(fh)
         for name, table in tables(data).items():
-            n = len(data["records"][name])
-            print(f"\n{data['structure']} {name}, {n} records: median σ/σ_MC · coverage · RMS z per mode, f | ξ")
-            for lab, cells in table.items():
-                fs = ", ".join("{:.2f}·{:.2f}·{:.2f}".format(*c[0]) for c in cells)
-                xs = ", ".join("{:.2f}·{:.2f}·{:.2f}".format(*c[1]) for c in cells)
-                inband = sum((0.85 <= c[i][0] <= 1.18) and (0.93 <= c[i][1] <= 0.97) for c in cells for i in (0, 1))
-                cov = min(c[i][1] for c in cells for i in (0, 1))
-                print(f"| {lab} | {fs} | {xs} | {inband}/{2 * len(cells)}, cov ≥ {cov:.2f} |")
+            print_table(data["structure"], name, len(data["records"][name]), table)
         for name, recs in data["records"].items():
             if all("n_selected" in r[0] for r in recs):  # pickles made before 2026-11-28 lack it
                 found = {v: [sum(v in r[m] for r in recs) for m in range(len(data["truth"]))] for v in VARIANTS}

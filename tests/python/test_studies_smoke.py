@@ -50,7 +50,7 @@ def test_every_study_is_smoke_tested():
                                            "above_order_diagnosis.py", "partial_unfreeze_mc.py",
                                            "bootstrap_sigma_mc.py", "coupling_sketch.py", "selected_members_mc.py",
                                            "diagram_shape_test.py", "regularized_gap_mc.py",
-                                           "monitoring_shape_test.py"}
+                                           "monitoring_shape_test.py", "selected_members_block_mc.py"}
     assert scripts == tested
 
 
@@ -77,6 +77,18 @@ def test_selected_sigma_mc(capsys):
     assert set(out) == {"input/output", "output-only", "input/output, cluster mean", "output-only, cluster mean"}
     assert out["output-only"].shape == (2, 6, 4)
     assert "| mode | f (Hz) | found |" in capsys.readouterr().out
+
+
+def test_selected_members_block_mc(capsys, tmp_path):
+    mod = _module("selected_members_block_mc")
+    out = tmp_path / "frame.pkl"
+    data = mod.run(3, "frame", out, duration=60.0)
+    row = next(r for r in data["records"]["IO"][0] if "default" in r)
+    assert {"default", "block corr", "block corr c_rep", "default rho_rep", "n_blocks"} <= set(row)
+    assert row["default c_rep"] == 1.0  # the default identification does not correct
+    mod.report([str(out)])
+    text = capsys.readouterr().out
+    assert "| block corr |" in text and "gate fired at the representative" in text
 
 
 def test_selected_members_mc(capsys, tmp_path):
