@@ -82,7 +82,8 @@ def plot_tracked_frequencies(ds, fig=None, *, modes=None, figsize=None):
             ax.plot(x[alarm], f[alarm], "v", color="tab:red", ms=5, label="alarm")
         shape_alarm = d["shape_alarm"].values.astype(bool) if "shape_alarm" in d else np.zeros(f.shape, bool)
         if shape_alarm.any():
-            ax.plot(x[shape_alarm], f[shape_alarm], "D", mfc="none", color="tab:purple", ms=5, label="shape alarm")
+            ax.plot(x[shape_alarm], f[shape_alarm], "D", mfc="none", color="tab:purple", ms=8, mew=1.2,
+                    label="shape alarm")  # larger than the alarm triangle: both show where both fire
         ax.set_ylabel(f"mode {mode}\nf [Hz]")
         ax.grid(alpha=0.3)
     _finish_track_axes(fig, axes, xlabel, ncol=5)
