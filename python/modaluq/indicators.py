@@ -197,10 +197,8 @@ def mac_matrix(shapes, covariances=None, factors=None) -> MacMatrix:
         if not np.isfinite(v).all():
             raise ValueError("factors must be finite")
 
-        def pair_std(i, j):
-            vij = np.concatenate([v[i], v[j]])  # the joint factor of [Re φ_i, Im φ_i, Re φ_j, Im φ_j]
-            joint = vij @ vij.T
-            return _core.modal_assurance_statistics_joint(phi[:, i], phi[:, j], 0.5 * (joint + joint.T)).std
+        def pair_std(i, j):  # the two shapes share the data: their cross-covariance V_i V_jᵀ
+            return mac_test(phi[:, i], phi[:, j], v[i] @ v[i].T, v[j] @ v[j].T, cross_covariance=v[i] @ v[j].T).std
     elif covariances is not None:
         c = np.asarray(covariances, dtype=float)
         if c.ndim != 3 or c.shape[0] != m or c.shape[1:] not in ((2 * l, 2 * l), (2 + 2 * l, 2 + 2 * l)):

@@ -141,8 +141,7 @@ def register(subparsers) -> argparse.ArgumentParser:
         description="Identify every record (files, folders or glob patterns) with the same settings, track the "
                     "modes from record to record against a reference period with a sigma-aware assignment, and "
                     "test each mode's frequency and damping, and its shape, for a change at a stated false-alarm rate. "
-                    "Results go "
-                    "to a NetCDF/Zarr store, with a table of the poles and one of the failures beside it; a "
+                    "Results go to a NetCDF/Zarr store, with a table of the poles and one of the failures beside it; a "
                     "re-run skips the records already done. Exit status 2 when no record could be identified.",
         epilog="Example: modaluq monitor data/*.csv --out tracks.nc --reference-records 48 --covariates temps.csv "
                "--frequency-range 0.5 20 --workers 4  (docs/monitoring.md)",
