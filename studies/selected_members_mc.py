@@ -12,8 +12,14 @@ Each table cell is median σ / σ_MC · coverage of ±1.96 σ around the Monte C
 f and for ξ of each true mode; the last column counts the cells inside both bands (median
 0.85–1.18, coverage 0.93–0.97) and gives the worst coverage.
 
+With ``--max-order N`` every record is identified at orders 2..N only, and with ``--k-star-factor
+C`` at orders 2..C k* (the record identified once at the automatic orders for its noise floor k*,
+then again with the orders capped; no change where C k* reaches the automatic maximum): what the
+engineer's call gives when it reads no member far above the true order (issue 27 (n)).
+
 Usage:
-  python studies/selected_members_mc.py RECORDS [chain|frame] OUT.pkl    # run (about 1 s a record)
+  python studies/selected_members_mc.py RECORDS [chain|frame] OUT.pkl [--max-order N | --k-star-factor C]
+                                                                          # run (about 1 s a record)
   python studies/selected_members_mc.py --report OUT.pkl [OUT2.pkl ...]  # the tables again
 """
 import pickle
@@ -44,6 +50,9 @@ def nearest_mode(sel, f0):
 def _mode_rows(res, truth):
     """Per true mode: a dict of each variant's (f, σ_f, ξ, σ_ξ) and the default's cluster members."""
     d = res.stabilization_diagram()
+    # ρ (noise_coupling) of every pole, flattened as the diagram's poles are (order by order)
+    rho = np.concatenate([np.full(m.n_modes, np.nan) if m.noise_coupling is None else m.noise_coupling
+                          for m in res.modes])
     sels = {v: res.select_modes(settings=c) for v, c in VARIANTS.items()}
     rows = []
     for f0 in truth:
@@ -58,7 +67,7 @@ def _mode_rows(res, truth):
                 m = np.asarray(sel.members[j])
                 row["members"] = dict(order=d.order[m], f=d.frequency_hz[m], xi=d.damping_ratio[m],
                                       sf=d.frequency_std[m], sxi=d.damping_std[m],
-                                      coupled=d.noise_coupled[m], rep=int(sel.representative_pole[j]),
+                                      coupled=d.noise_coupled[m], rho=rho[m], rep=int(sel.representative_pole[j]),
                                       rep_index=int(np.flatnonzero(m == sel.representative_pole[j])[0]))
         row["k_star"] = int(d.noise_floor_order)
         row["n_selected"] = {v: sel.n_modes for v, sel in sels.items()}
@@ -66,9 +75,20 @@ def _mode_rows(res, truth):
     return rows
 
 
-def run(n_records, structure, out=None, duration=DURATION):
-    """Identify ``n_records`` records of ``structure`` (output-only, then input/output); write the
-    data to ``out`` (a pickle) when given; return it."""
+def identify_capped(y, u, fs, max_order=None, k_star_factor=None):
+    """The engineer's identification (automatic settings, ``frequency_range=(1, 20)``), at orders
+    2..max_order, or 2..k_star_factor k* (k* of the automatic identification), when given."""
+    res = modaluq.identify(y, u, fs=fs, frequency_range=(1, 20))
+    cap = max_order if k_star_factor is None else int(k_star_factor * res.significant_singular_values) // 2 * 2
+    if cap is None or cap >= max(res.settings["orders"]):
+        return res
+    return modaluq.identify(y, u, fs=fs, frequency_range=(1, 20), orders=list(range(2, cap + 1, 2)))
+
+
+def run(n_records, structure, out=None, duration=DURATION, max_order=None, k_star_factor=None):
+    """Identify ``n_records`` records of ``structure`` (output-only, then input/output), at capped
+    orders when asked (:func:`identify_capped`); write the data to ``out`` (a pickle) when given;
+    return it."""
     keywords, offset = STRUCTURES[structure]
     data = {"structure": structure, "records": {}}
     for with_input in (False, True):
@@ -79,7 +99,7 @@ def run(n_records, structure, out=None, duration=DURATION):
             truth = np.sort(sim.frequency_hz)
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
-                res = modaluq.identify(sim.y, sim.u if with_input else None, fs=sim.fs, frequency_range=(1, 20))
+                res = identify_capped(sim.y, sim.u if with_input else None, sim.fs, max_order, k_star_factor)
             recs.append(_mode_rows(res, truth))
             if (k + 1) % 20 == 0:
                 print(f"{structure} {name}: {k + 1}/{n_records}", flush=True)
@@ -99,6 +119,30 @@ def spread_candidate(row):
     return np.hypot(sf, np.std(mem["f"], ddof=1)), np.hypot(sxi, np.std(mem["xi"], ddof=1))
 
 
+#: ρ above which every reliable member of a cluster has lost its own directions to the freeze
+UNANCHORED_RHO = 5.0
+
+
+def unanchored_candidate(row, limit=UNANCHORED_RHO):
+    """A candidate measured and not taken (docs/validation.md (n)): a cluster none of whose reliable
+    members (not flagged, the cluster not mostly flagged) has ρ ≤ ``limit`` has no order at which the
+    mode's own singular directions are free (k* below them): its σ becomes the median over those
+    members of ρ σ, the unfrozen σ's bound, when larger. None for pickles without ρ."""
+    mem = row["members"]
+    if "rho" not in mem:
+        return None
+    sf, sxi = row["default"][1], row["default"][3]
+    reliable = ~mem["coupled"]
+    if 2 * reliable.sum() < reliable.size or not np.nanmin(mem["rho"][reliable], initial=np.inf) > limit:
+        return sf, sxi
+    rho = mem["rho"][reliable]
+    return max(sf, np.median(rho * mem["sf"][reliable])), max(sxi, np.median(rho * mem["sxi"][reliable]))
+
+
+#: the candidates computed after the run from the default's cluster: label -> function of a row
+CANDIDATES = {"√(σ² + spread²)": spread_candidate, f"unanchored (ρ > {UNANCHORED_RHO:g}): ρ σ": unanchored_candidate}
+
+
 def _cells(values, sigmas):
     """median σ / std over records, coverage of ±1.96 σ around the mean, RMS z."""
     ok = np.isfinite(values) & np.isfinite(sigmas) & (sigmas > 0)
@@ -110,22 +154,24 @@ def _cells(values, sigmas):
 
 def tables(data, variants=None, spread=True) -> dict:
     """{configuration: {variant: [(cells of f, cells of ξ) per true mode]}} from a run's data
-    (``variants``: the selections kept, default this study's; ``spread``: with the candidate of
-    :func:`spread_candidate`)."""
-    variants = list(VARIANTS if variants is None else variants) + (["√(σ² + spread²)"] if spread else [])
+    (``variants``: the selections kept, default this study's; ``spread``: with the candidates of
+    :data:`CANDIDATES`, where the pickle holds what they need)."""
+    variants = list(VARIANTS if variants is None else variants) + (list(CANDIDATES) if spread else [])
     out = {}
     for name, recs in data["records"].items():
         table = {}
         for m in range(len(data["truth"])):
             for v in variants:
-                rows = [r[m] for r in recs if ("default" if v.startswith("√") else v) in r[m]]
-                if len(rows) < 3:
-                    continue
-                if v.startswith("√"):
-                    a = np.array([(r["default"][0], sf, r["default"][2], sxi)
-                                  for r in rows for sf, sxi in [spread_candidate(r)]])
+                rows = [r[m] for r in recs if ("default" if v in CANDIDATES else v) in r[m]]
+                if v in CANDIDATES:
+                    sig = [CANDIDATES[v](r) for r in rows]
+                    if any(x is None for x in sig):
+                        continue
+                    a = np.array([(r["default"][0], sf, r["default"][2], sxi) for r, (sf, sxi) in zip(rows, sig)])
                 else:
                     a = np.array([r[v] for r in rows])
+                if len(rows) < 3:
+                    continue
                 table.setdefault(v, []).append((_cells(a[:, 0], a[:, 1]), _cells(a[:, 2], a[:, 3])))
         out[name] = table
     return out
@@ -164,4 +210,10 @@ if __name__ == "__main__":
     if sys.argv[1] == "--report":
         report(sys.argv[2:])
     else:
-        run(int(sys.argv[1]), sys.argv[2], sys.argv[3])
+        cap = dict(zip(sys.argv[4::2], sys.argv[5::2]))
+        unknown = set(cap) - {"--max-order", "--k-star-factor"}
+        if unknown:
+            sys.exit(f"unknown options {sorted(unknown)}; see the usage in the docstring")
+        run(int(sys.argv[1]), sys.argv[2], sys.argv[3],
+            max_order=int(cap["--max-order"]) if "--max-order" in cap else None,
+            k_star_factor=float(cap["--k-star-factor"]) if "--k-star-factor" in cap else None)

@@ -50,7 +50,8 @@ def test_every_study_is_smoke_tested():
                                            "above_order_diagnosis.py", "partial_unfreeze_mc.py",
                                            "bootstrap_sigma_mc.py", "coupling_sketch.py", "selected_members_mc.py",
                                            "diagram_shape_test.py", "regularized_gap_mc.py",
-                                           "monitoring_shape_test.py", "selected_members_block_mc.py"}
+                                           "monitoring_shape_test.py", "selected_members_block_mc.py",
+                                           "bootstrap_cv_mc.py"}
     assert scripts == tested
 
 
@@ -103,7 +104,12 @@ def test_selected_members_mc(capsys, tmp_path):
     mod.report([str(out)])
     text = capsys.readouterr().out
     assert "| no order check |" in text and "σ widened by the order" in text
+    assert "| unanchored (ρ > 5): ρ σ |" in text
     assert "true modes found / modes selected per record" in text and "no pole reassign [" in text
+    # capped at 3 k*: no member of any selected mode above it
+    capped = mod.run(2, "frame", duration=60.0, k_star_factor=3.0)
+    rows = [r for recs in capped["records"].values() for rec in recs for r in rec if "members" in r]
+    assert rows and all(r["members"]["order"].max() <= 3 * r["k_star"] for r in rows)
 
 
 @pytest.mark.slow
@@ -230,6 +236,20 @@ def test_bootstrap_sigma_mc(capsys, tmp_path):
     lin = np.std(rec[8]["plain"] @ rec["T_H"] @ eps, axis=-1, ddof=1)             # modes × 2
     assert np.allclose(bs["f"], rec[8]["f"], rtol=1e-12)
     assert np.allclose(bs["boot"][0], lin, rtol=1e-3)
+
+
+def test_bootstrap_cv_mc(capsys, tmp_path):
+    study = _module("bootstrap_cv_mc")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # statistics of 2 records
+        out = study.main(n_records=2, structure="frame", draws=12, out=tmp_path / "cv.npz", progress=False)
+    assert out["s_cv"].shape == (2, 3, 2, 4, len(study.DRAW_COUNTS), 2)
+    # the oracle's frozen first-order σ is the core's wherever the core kept it (poles not flagged)
+    ok = np.isfinite(out["s_lin"]) & ~out["flag"][..., None]
+    assert ok.sum() > 20 and np.allclose(out["s_lin"][ok], out["s_core"][ok], rtol=1e-6)
+    # at the true order (8) the draws move the poles as the first-order map says
+    assert np.nanmedian(out["corr"][:, 0]) > 0.95
+    assert "| cv100 all |" in capsys.readouterr().out
 
 
 def test_poser_mc(capsys):
