@@ -64,6 +64,7 @@ void modaluq::python::bind_stabilization(py::module_& m) {
         .def_readwrite("noise_coupled", &Poles::noise_coupled)
         .def_readwrite("frequency_damping_correlation", &Poles::frequency_damping_correlation)
         .def_readwrite("block_too_short", &Poles::block_too_short)
+        .def_readwrite("noise_coupling", &Poles::noise_coupling)
         .def_readwrite("frequency_damping_factor", &Poles::frequency_damping_factor)
         .def_readwrite("orders", &Poles::orders)
         .def_readwrite("noise_floor_order", &Poles::noise_floor_order)
@@ -110,6 +111,7 @@ void modaluq::python::bind_stabilization(py::module_& m) {
         .def_readwrite("order_discrepancy", &ClusteringOptions::order_discrepancy)
         .def_readwrite("drop_noise_twins", &ClusteringOptions::drop_noise_twins)
         .def_readwrite("reassign_borrowed_poles", &ClusteringOptions::reassign_borrowed_poles)
+        .def_readwrite("unanchored_noise_coupling", &ClusteringOptions::unanchored_noise_coupling)
         .def("validate", &ClusteringOptions::validate);
 
     py::class_<SelectedModes>(m, "SelectedModes")
@@ -148,6 +150,7 @@ void modaluq::python::bind_stabilization(py::module_& m) {
         .def_readonly("frequency_damping_correlation", &SelectedModes::frequency_damping_correlation)
         .def_readonly("block_too_short", &SelectedModes::block_too_short)
         .def_readonly("order_discrepancy", &SelectedModes::order_discrepancy)
+        .def_readonly("unanchored", &SelectedModes::unanchored)
         .def_readonly("min_cluster_size", &SelectedModes::min_cluster_size)
         .def_readonly("max_frequency_std_per_bandwidth", &SelectedModes::max_frequency_std_per_bandwidth);
     m.def("select_modes", &select_modes, py::arg("diagram"), py::arg("options"),

@@ -119,15 +119,18 @@ def spread_candidate(row):
     return np.hypot(sf, np.std(mem["f"], ddof=1)), np.hypot(sxi, np.std(mem["xi"], ddof=1))
 
 
-#: ρ above which every reliable member of a cluster has lost its own directions to the freeze
-UNANCHORED_RHO = 5.0
+#: ρ above which every reliable member of a cluster has lost its own directions to the freeze (the
+#: core's default ClusteringOptions::unanchored_noise_coupling)
+UNANCHORED_RHO = 2.0
 
 
 def unanchored_candidate(row, limit=UNANCHORED_RHO):
-    """A candidate measured and not taken (docs/validation.md (n)): a cluster none of whose reliable
-    members (not flagged, the cluster not mostly flagged) has ρ ≤ ``limit`` has no order at which the
-    mode's own singular directions are free (k* below them): its σ becomes the median over those
-    members of ρ σ, the unfrozen σ's bound, when larger. None for pickles without ρ."""
+    """The rule the selection took on 2026-12-07 (docs/validation.md (n)), computed after the run so
+    that a run made without it shows it: a cluster none of whose reliable members (not flagged, the
+    cluster not mostly flagged) has ρ ≤ ``limit`` has no order at which the mode's own singular
+    directions are free (k* below them): its σ becomes the median over those members of ρ σ, the
+    unfrozen σ's bound, when larger. None for pickles without ρ. (On a run with the rule in the core
+    it changes nothing but the order-discrepancy widening's base, which comes first there.)"""
     mem = row["members"]
     if "rho" not in mem:
         return None

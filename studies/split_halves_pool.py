@@ -102,6 +102,8 @@ def _clustering(representative):
         return modaluq.ClusteringSettings(reassign_borrowed_poles=False)
     if representative == "no-order-check":  # the default but order_discrepancy (before 2026-11-27)
         return modaluq.ClusteringSettings(order_discrepancy=False)
+    if representative == "no-unanchored":  # the default but unanchored_noise_coupling (before 2026-12-07)
+        return modaluq.ClusteringSettings(unanchored_noise_coupling=None)
     if representative in ("shape-lowest", "shape-median"):
         return modaluq.ClusteringSettings(shape_representative=representative.split("-")[1])
     return modaluq.ClusteringSettings(representative=representative)
@@ -251,13 +253,14 @@ if __name__ == "__main__":
     p.add_argument("--levels", type=int, nargs="+", default=list(LEVELS), help="numbers of windows (default 1 2 4 8)")
     p.add_argument("--tolerance", type=float, default=0.02, help="pairing: largest relative frequency difference")
     p.add_argument("--representative", choices=("median", "lowest", "shape-lowest", "shape-median", "no-order-check",
-                                                "no-noise-twins", "no-pole-reassign"),
+                                                "no-noise-twins", "no-pole-reassign", "no-unanchored"),
                    default="median",
                    help="ClusteringSettings.representative of every analysis (default median, with the "
                         "default shape_representative='lowest'); shape-lowest / shape-median: the median "
                         "representative with that shape_representative (shape-median: the default before "
                         "2026-11-27); no-order-check, no-noise-twins, no-pole-reassign: the default with "
-                        "order_discrepancy, drop_noise_twins or reassign_borrowed_poles False")
+                        "order_discrepancy, drop_noise_twins or reassign_borrowed_poles False; no-unanchored: "
+                        "the default with unanchored_noise_coupling None")
     p.add_argument("--pair-within-std", type=float, default=4.0,
                    help="pairing: also pair frequencies within this many combined σ_f (default 4, the package's "
                         "default since 2026-11-28; 0: the relative window alone, the rule before)")

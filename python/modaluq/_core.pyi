@@ -896,6 +896,12 @@ class Poles:
     def noise_coupled(self, arg0: typing.Annotated[numpy.typing.ArrayLike, numpy.bool, "[m, 1]"]) -> None:
         ...
     @property
+    def noise_coupling(self) -> typing.Annotated[numpy.typing.NDArray[numpy.float64], "[m, 1]"]:
+        ...
+    @noise_coupling.setter
+    def noise_coupling(self, arg0: typing.Annotated[numpy.typing.ArrayLike, numpy.float64, "[m, 1]"]) -> None:
+        ...
+    @property
     def noise_floor_order(self) -> int:
         ...
     @noise_floor_order.setter
@@ -1047,6 +1053,12 @@ class ClusteringOptions:
     @statuses.setter
     def statuses(self, arg0: collections.abc.Sequence[PoleStatus]) -> None:
         ...
+    @property
+    def unanchored_noise_coupling(self) -> float | None:
+        ...
+    @unanchored_noise_coupling.setter
+    def unanchored_noise_coupling(self, arg0: typing.SupportsFloat | typing.SupportsIndex | None) -> None:
+        ...
 class SelectedModes:
     @property
     def block_too_short(self) -> typing.Annotated[numpy.typing.NDArray[numpy.bool], "[m, 1]"]:
@@ -1158,6 +1170,9 @@ class SelectedModes:
         ...
     @property
     def shape_pole(self) -> typing.Annotated[numpy.typing.NDArray[numpy.int64], "[m, 1]"]:
+        ...
+    @property
+    def unanchored(self) -> typing.Annotated[numpy.typing.NDArray[numpy.bool], "[m, 1]"]:
         ...
 class IndicatorStatistics:
     @property

@@ -182,10 +182,15 @@ class SelectedModes:
     #: the representative and the cluster's lowest sufficient member, which exceeded 1.96 of their
     #: combined σ (``settings.order_discrepancy``): the estimate moves with the model order
     order_discrepancy: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
+    #: (n_modes,) bool, every reliable pole of the mode depends on the frozen noise directions
+    #: (``Diagram.noise_coupling`` above ``settings.unanchored_noise_coupling`` at every order: the
+    #: noise floor k* is below the mode's own singular values): ``frequency_std`` and ``damping_std``
+    #: are at least the poles' median ρ σ, the unfrozen σ's bound
+    unanchored: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
     #: (n_modes, 2+2l, 2+2l) covariance of [f, ξ, Re shape, Im shape] of each shape pole
     #: (``Diagram.pole_covariance``; the representative's when ``shape_representative`` is
     #: ``"median"``), or None without uncertainty. With ``settings.cluster_std == "mean"``, a shape
-    #: pole other than the representative, or σ widened (:attr:`order_discrepancy`), its f and ξ
+    #: pole other than the representative, or σ widened (:attr:`order_discrepancy`, :attr:`unanchored`), its f and ξ
     #: entries are the mode's: the [f, ξ] block from
     #: ``frequency_std``, ``damping_std`` and ``frequency_damping_correlation``, and their
     #: covariance with the shape the pole's correlation at those σ (the mean is formed for f and ξ only).
@@ -220,10 +225,14 @@ class SelectedModes:
     ORDER_DISCREPANCY_LEGEND = ("widened: f or xi at the representative's order and at the lowest sufficient "
                                 "order differ by more than 1.96 of the two poles' combined std; the std includes "
                                 "that difference (order_discrepancy, docs/settings.md)")
+    #: the legend line below a table that marks unanchored modes
+    UNANCHORED_LEGEND = ("rho*std: every pole of the mode depends on the frozen noise directions (the noise floor k* "
+                         "is below the mode); its std are the unfrozen bound rho*std (unanchored_noise_coupling, "
+                         "docs/settings.md)")
 
     def __post_init__(self):
         # one flag per mode; unknown (a SelectedModes made by hand without it): none flagged
-        for name in ("noise_coupled", "order_discrepancy"):
+        for name in ("noise_coupled", "order_discrepancy", "unanchored"):
             flags = np.asarray(getattr(self, name), bool)
             if flags.shape != np.shape(self.frequency_hz):
                 flags = np.zeros(np.shape(self.frequency_hz), bool)
@@ -298,11 +307,14 @@ class SelectedModes:
                 f"{cell(self.frequency_spread[i], 8, 4)}  {100 * self.damping_ratio[i]:>7.3f}  "
                 f"{cell(100 * self.damping_std[i], 7, 3)}  {cell(100 * self.damping_spread[i], 9, 3)}  "
                 f"{int(self.representative_order[i]):>5}  {int(self.n_poles[i]):>5}"
-                + ("  noise?" if flags[i] else "") + ("  widened" if self.order_discrepancy[i] else ""))
+                + ("  noise?" if flags[i] else "") + ("  widened" if self.order_discrepancy[i] else "")
+                + ("  rho*std" if self.unanchored[i] else ""))
         if flags.any():
             lines.append(self.NOISE_COUPLED_LEGEND)
         if self.order_discrepancy.any():
             lines.append(self.ORDER_DISCREPANCY_LEGEND)
+        if self.unanchored.any():
+            lines.append(self.UNANCHORED_LEGEND)
         return "\n".join(lines)
 
     @property
@@ -476,6 +488,7 @@ def select_modes(diagram, settings: ClusteringSettings | None = None, **kwargs) 
         frequency_damping_correlation=sel.frequency_damping_correlation,
         block_too_short=np.asarray(sel.block_too_short, bool),
         order_discrepancy=np.asarray(sel.order_discrepancy, bool),
+        unanchored=np.asarray(sel.unanchored, bool),
         # from the diagram's per-pole flags: every member of the cluster noise-coupled
         noise_coupled=np.array([m.size > 0 and bool(np.asarray(diagram.noise_coupled, bool)[m].all())
                                 for m in (np.asarray(m, np.int64) for m in sel.members)], dtype=bool),
@@ -500,7 +513,7 @@ def _shape_indicators(diagram, modes: SelectedModes) -> dict:
             # per mode: one whose shape pole is its representative keeps that pole's covariance,
             # unless its σ are the cluster mean's or were widened by the model order
             which = (np.asarray(modes.shape_pole) != np.asarray(modes.representative_pole)) | (
-                modes.settings.cluster_std == "mean") | modes.order_discrepancy
+                modes.settings.cluster_std == "mean") | modes.order_discrepancy | modes.unanchored
             covs = _with_cluster_std(covs, modes, which)
     factors = None
     pole_shape_factor = getattr(diagram, "pole_shape_factor", None)

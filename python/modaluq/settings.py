@@ -518,6 +518,18 @@ class ClusteringSettings:
         output-only coverage of ±1.96 σ to 0.92–0.96 for every mode (docs/validation.md, issue 27
         (h)). False: no widening, as before 2026-11-27 (the other rule of that change, a mostly
         noise-coupled cluster's σ over all its poles, has no switch).
+    unanchored_noise_coupling : float or None
+        A mode with no order below its own noise floor (default 2.0): when every reliable pole of a
+        cluster (not at a close cut, not noise-coupled; the cluster not mostly noise-coupled) has
+        ``noise_coupling`` ρ (``Diagram.noise_coupling``: its σ with the noise directions free over
+        its σ with them frozen, 1 at orders ≤ k*) above this, the mode's own singular directions
+        lie below the noise floor k* (a weak mode) and every pole's frozen σ misses them. The mode's
+        σ_f and σ_ξ become at least the median of ρ σ over those poles, the unfrozen σ's bound,
+        and ``SelectedModes.unanchored`` says so. On the paper's chain it fires on 7 % of the
+        1.9 Hz input/output modes (k* = 11 < 12, ρ 2.7–3.7 at every order, σ_ξ 3.5× too small)
+        and 5 % of the 17 Hz output-only ones, and lifts the coverage of ±1.96 σ of the engineer's
+        call's worst cell, that mode's input/output ξ, from 0.90 to 0.93 (docs/validation.md, issue
+        27 (n)). None: no such rule (as before 2026-12-07).
     """
 
     distance_threshold: float = _CLUSTERING["distance_threshold"]
@@ -541,6 +553,7 @@ class ClusteringSettings:
     order_discrepancy: bool = _CLUSTERING["order_discrepancy"]
     drop_noise_twins: bool = _CLUSTERING["drop_noise_twins"]
     reassign_borrowed_poles: bool = _CLUSTERING["reassign_borrowed_poles"]
+    unanchored_noise_coupling: float | None = _CLUSTERING["unanchored_noise_coupling"]
 
     def __post_init__(self):
         check_real("distance_threshold", self.distance_threshold, low=0, low_open=True)
@@ -549,6 +562,7 @@ class ClusteringSettings:
         check_real("min_cluster_fraction", self.min_cluster_fraction, low=0, high=1, low_open=True)
         check_real("max_frequency_std_per_bandwidth", self.max_frequency_std_per_bandwidth, low=0, low_open=True,
               allow_none=True)
+        check_real("unanchored_noise_coupling", self.unanchored_noise_coupling, low=1, allow_none=True)
         for name in ("per_cluster_min_size", "merge_fragments", "drop_doublets", "order_discrepancy",
                      "drop_noise_twins", "reassign_borrowed_poles"):
             object.__setattr__(self, name, check_boolean(name, getattr(self, name)))  # a bool, as to_dict gives

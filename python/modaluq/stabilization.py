@@ -123,6 +123,9 @@ class Diagram:
     #: (n_poles,) bool, the blocks are shorter than half the pole's decay time (``Modes.block_too_short``);
     #: empty when unknown
     block_too_short: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
+    #: (n_poles,) ρ of each pole (``Modes.noise_coupling``): its σ with the noise singular vectors free
+    #: over its σ with them frozen, 1 at orders ≤ k*; NaN without uncertainty; empty when unknown
+    noise_coupling: np.ndarray = field(default_factory=lambda: np.zeros(0))
     #: samples of the record identified (``Result.n_samples``: after any window or decimation);
     #: a ``y`` given to :meth:`plot` must have as many (0: unknown, not checked)
     n_samples: int = 0
@@ -337,6 +340,7 @@ def stabilization_diagram(result, criteria: StabilityCriteria | None = None, *,
         fs=float(result.fs), output_names=names, criteria=criteria, has_uncertainty=has_std,
         result_settings=dict(result.settings),
         frequency_damping_correlation=p.frequency_damping_correlation, block_too_short=p.block_too_short,
+        noise_coupling=p.noise_coupling,
         frequency_damping_factor=_factor_per_pole(p.frequency_damping_factor, n_poles),
         n_samples=int(getattr(result, "n_samples", 0)),
         low_signal_to_noise=bool(getattr(result, "low_signal_to_noise", False)),
@@ -388,14 +392,18 @@ def _poles_of_modes(result, has_std: bool):
     # as poles_of: NaN / False without uncertainty; empty when unknown (a Result made without them)
     rho = [getattr(m, "frequency_damping_correlation", None) for m in modes]
     slow = [getattr(m, "block_too_short", None) for m in modes]
+    coupling = [getattr(m, "noise_coupling", None) for m in modes]
     if not has_std:
         p.frequency_damping_correlation = per_pole([np.full(m.n_modes, np.nan) for m in modes])
         p.block_too_short = per_pole([np.zeros(m.n_modes, bool) for m in modes], bool)
+        p.noise_coupling = per_pole([np.full(m.n_modes, np.nan) for m in modes])
     else:
         if all(r is not None for r in rho):
             p.frequency_damping_correlation = per_pole(rho)
         if all(b is not None for b in slow):
             p.block_too_short = per_pole(slow, bool)
+        if all(c is not None and np.size(c) == m.n_modes for c, m in zip(coupling, modes)):
+            p.noise_coupling = per_pole(coupling)
         factors = [getattr(m, "frequency_damping_factor", None) for m in modes]
         if modes and all(u is not None for u in factors) and len({u.shape[2] for u in factors}) == 1:
             # (2 n_b x n_poles), column i [u_f; u_xi] of pole i, as poles_of stacks Modes::frequency_damping_factor

@@ -343,6 +343,58 @@ TEST_CASE("selection: a cluster most of whose poles are noise-coupled takes the 
     CHECK(some.representative_order(0) == 40);
 }
 
+TEST_CASE("selection: a mode none of whose reliable poles is free of the frozen noise directions takes their rho sigma") {
+    // Orders 4..40 (19 poles) of one mode, sigma_f 0.01 Hz and sigma_xi 1e-3 (frozen); rho of pole
+    // i is 3 + 0.1 i, above the default limit 2 at every order: the median rho is 3.9.
+    std::map<Index, std::vector<P>> by_order;
+    for (Index n = 4; n <= 40; n += 2) by_order[n] = {{10.0, 0.02, 0}};
+    modaluq::Diagram d = all_stable(by_order);
+    const Index np = d.poles.size();
+    REQUIRE(np == 19);
+    d.poles.noise_coupling = Eigen::VectorXd::LinSpaced(np, 3.0, 3.0 + 0.1 * double(np - 1));
+    modaluq::ClusteringOptions o;
+    REQUIRE(o.unanchored_noise_coupling);
+    CHECK(*o.unanchored_noise_coupling == 2.0);
+    const auto s = modaluq::select_modes(d, o);
+    REQUIRE(s.n_modes() == 1);
+    CHECK(s.unanchored(0));
+    CHECK(s.frequency_std(0) == doctest::Approx(3.9 * 0.01).epsilon(1e-12));
+    CHECK(s.damping_std(0) == doctest::Approx(3.9 * 1e-3).epsilon(1e-12));
+    CHECK(s.frequency_hz(0) == 10.0);  // the value does not move
+    // one pole free of the frozen directions (rho 1: an order <= k*) anchors the mode
+    modaluq::Diagram anchored = d;
+    anchored.poles.noise_coupling(5) = 1.0;
+    const auto a = modaluq::select_modes(anchored, o);
+    CHECK_FALSE(a.unanchored(0));
+    CHECK(a.frequency_std(0) == doctest::Approx(0.01).epsilon(1e-12));
+    // a pole whose rho is unknown (NaN) is not judged unanchored
+    anchored.poles.noise_coupling(5) = std::numeric_limits<double>::quiet_NaN();
+    CHECK_FALSE(modaluq::select_modes(anchored, o).unanchored(0));
+    // a noise-coupled pole is not a reliable one: its rho does not anchor the rest
+    modaluq::Diagram flagged = d;
+    flagged.poles.noise_coupling(5) = 1.0;
+    flagged.poles.noise_coupled(5) = true;
+    const auto fl = modaluq::select_modes(flagged, o);
+    CHECK(fl.unanchored(0));
+    CHECK(fl.frequency_std(0) == doctest::Approx(0.01 * 0.5 * (3.9 + 4.0)).epsilon(1e-12));  // 18 reliable poles
+    // a larger limit, no limit, or no rho: the frozen median
+    o.unanchored_noise_coupling = 5.0;
+    CHECK_FALSE(modaluq::select_modes(d, o).unanchored(0));
+    o.unanchored_noise_coupling.reset();
+    const auto off = modaluq::select_modes(d, o);
+    CHECK_FALSE(off.unanchored(0));
+    CHECK(off.frequency_std(0) == doctest::Approx(0.01).epsilon(1e-12));
+    modaluq::Diagram unknown = d;
+    unknown.poles.noise_coupling.resize(0);
+    CHECK_FALSE(modaluq::select_modes(unknown).unanchored(0));
+    // rho is at least 1: a limit below it is refused, and so is a noise_coupling of the wrong size
+    o.unanchored_noise_coupling = 0.5;
+    CHECK_THROWS_WITH_AS(modaluq::select_modes(d, o), doctest::Contains("unanchored_noise_coupling"),
+                         modaluq::invalid_argument);
+    unknown.poles.noise_coupling = Eigen::VectorXd::Ones(3);
+    CHECK_THROWS_WITH_AS(unknown.poles.validate(), doctest::Contains("noise_coupling"), modaluq::invalid_argument);
+}
+
 TEST_CASE("selection: a cluster whose frequency is less certain than its peak's bandwidth is dropped") {
     // Two stable columns over 10 orders: a 2 %-damped mode with sigma_f = 0.1 % of f
     // (sigma_f / (f xi) = 0.05) and a 0.5 %-damped column with sigma_f = 1 % of f (ratio 2).

@@ -433,6 +433,7 @@ def select_modes_reference(diagram: Diagram, settings: ClusteringSettings | None
     sxi_med = np.full(n_modes, np.nan)
     rho = np.full(n_modes, np.nan)
     widened = np.zeros(n_modes, dtype=bool)
+    unanchored = np.zeros(n_modes, dtype=bool)
     mode_of_pole = np.full(diagram.n_poles, -1, dtype=np.int64)
     for k, members in enumerate(kept):
         mode_of_pole[members] = k
@@ -481,6 +482,16 @@ def select_modes_reference(diagram: Diagram, settings: ClusteringSettings | None
                 sf_med[k], sxi_med[k] = diagram.frequency_std[rep[k]], diagram.damping_std[rep[k]]
             if diagram.frequency_damping_correlation.size == diagram.n_poles:
                 rho[k] = diagram.frequency_damping_correlation[rep[k]]
+        # a mode with no order below its own noise floor: every reliable pole's rho above the limit
+        # gives the mode at least their median rho sigma (the unfrozen bound)
+        mostly = 2 * diagram.noise_coupled[members].sum() > members.size
+        limit = settings.unanchored_noise_coupling
+        rhos = diagram.noise_coupling
+        if limit is not None and rhos.size == diagram.n_poles and not mostly and reliable.size \
+                and np.all(rhos[reliable] > limit):
+            sf_med[k] = max(sf_med[k], np.median(rhos[reliable] * diagram.frequency_std[reliable]))
+            sxi_med[k] = max(sxi_med[k], np.median(rhos[reliable] * diagram.damping_std[reliable]))
+            unanchored[k] = True
         # the shape pole (shape_representative "lowest"): the lowest sufficient member, unless the
         # representative is lower and holds every selected mode (order >= 2 m)
         keep_rep = diagram.order[rep[k]] >= 2 * n_modes and diagram.order[lowest_member] >= diagram.order[rep[k]]
@@ -523,4 +534,5 @@ def select_modes_reference(diagram: Diagram, settings: ClusteringSettings | None
                                               for m in kept]),
         min_cluster_size=int(smallest), output_names=diagram.output_names, settings=settings,
         has_uncertainty=diagram.has_uncertainty, frequency_damping_correlation=rho, order_discrepancy=widened,
+        unanchored=unanchored,
     )

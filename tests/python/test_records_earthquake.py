@@ -131,16 +131,20 @@ def test_the_engineers_call_selects_the_modes_shown_physical(record, with_input,
 @pytest.mark.parametrize("record", ["meloland", "painter"])
 @pytest.mark.parametrize("with_input", [False, True], ids=["output-only", "ground input"])
 def test_the_engineers_call_selects_nothing_wildly_spurious(record, with_input):
-    """Every selected mode has ξ < 10 % and σ_f/f < 3 %; at most three of them are not modes shown
+    """Every selected mode has ξ < 10 % and σ_f/f < 3 %, but a mode with no pole free of the frozen
+    noise directions (``SelectedModes.unanchored``: its σ is the unfrozen bound ρσ), which must be
+    one not shown physical, with σ_f/f < 5 % (Meloland's 19.26 Hz with the ground input: 0.6 %
+    frozen, 3.3 % as ρσ); at most three of them are not modes shown
     physical (selected and not shown: Meloland 4.01 Hz output-only, at the ground motion's 4.05 Hz
     peak; 5.19, 8.51 and 19.26 Hz with the ground input; Painter Street 8.02 and 10.77 Hz
     output-only); nothing at the ground motion's 1.44 Hz peak (the README's 1.47 Hz pole)."""
     sel, _ = selected(record, with_input)
     f = sel.frequency_hz
     assert np.all(sel.damping_ratio < 0.10), sel.damping_ratio
-    assert np.all(sel.frequency_std / f < 0.03), sel.frequency_std / f
+    assert np.all(sel.frequency_std / f < np.where(sel.unanchored, 0.05, 0.03)), sel.frequency_std / f
     expected = [p.values[3] if hasattr(p, "values") else p[3] for p in PHYSICAL
                 if (p.values if hasattr(p, "values") else p)[:2] == (record, with_input)]
     unproven = [x for x in f if not any(abs(x / e - 1) <= TOL for e in expected)]
     assert len(unproven) <= 3, unproven
+    assert set(f[sel.unanchored]) <= set(unproven), (f[sel.unanchored], unproven)
     assert not np.any(np.abs(f / 1.47 - 1) <= TOL), f

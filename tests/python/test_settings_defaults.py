@@ -86,6 +86,10 @@ def test_not_set_and_enums_cross_both_ways():
     assert d["drop_noise_twins"] is True and ClusteringSettings(drop_noise_twins=False).to_core().drop_noise_twins is False
     assert (d["reassign_borrowed_poles"] is True
             and ClusteringSettings(reassign_borrowed_poles=False).to_core().reassign_borrowed_poles is False)
+    assert d["unanchored_noise_coupling"] == 2.0
+    assert ClusteringSettings(unanchored_noise_coupling=None).to_core().unanchored_noise_coupling is None
+    with pytest.raises(ValueError, match="unanchored_noise_coupling"):
+        ClusteringSettings(unanchored_noise_coupling=0.5)  # rho is at least 1
     o = Settings(block_rows=10, orders=[4, 2], n_blocks=20, references=[1], past_block_rows=None).to_core(50.0)
     assert (o.fs, o.block_rows, o.past_block_rows, o.orders, o.references) == (50.0, 10, 0, [2, 4], [1])
     assert StabilityCriteria(frequency_std_factor=None).to_core().frequency_std_factor is None
@@ -98,7 +102,8 @@ def test_to_dict_and_record_are_unchanged():
         "drop_doublets": True, "doublet_window": 0.05, "doublet_min_mac": 0.8, "fragment_std_factor": 3.0,
         "fragment_min_mac": 0.8, "fragment_max_shared": 0.25, "statuses": ["stable"], "linkage": "average",
         "cluster_std": None, "representative": "median", "shape_representative": "lowest",
-        "order_discrepancy": True, "drop_noise_twins": True, "reassign_borrowed_poles": True}
+        "order_discrepancy": True, "drop_noise_twins": True, "reassign_borrowed_poles": True,
+        "unanchored_noise_coupling": 2.0}
     assert StabilityCriteria().to_dict() == {
         "max_frequency_change": 0.01, "max_damping_change": 0.1, "min_mac": 0.98, "frequency_std_factor": 2.0,
         "max_frequency_cov": 0.05, "min_damping_ratio": 0.0, "max_damping_ratio": 0.2, "damping_std_factor": 2.0,

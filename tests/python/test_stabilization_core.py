@@ -39,6 +39,9 @@ def _records():
         # input/output, where a lightly damped 16 Hz cluster holds the 15.8 Hz mode's poles of orders 4-6
         "chain input/output, borrowed poles": lambda: modaluq.identify(
             *(lambda s: (s.y, s.u))(modaluq.simulate(20_000, seed=5057)), fs=50.0, frequency_range=(1, 20)),
+        # input/output, k* 11 < 12: the 1.9 Hz mode has no pole free of the frozen noise directions
+        "chain input/output, unanchored": lambda: modaluq.identify(
+            *(lambda s: (s.y, s.u))(modaluq.simulate(20_000, seed=7215)), fs=50.0, frequency_range=(1, 20)),
         # a multi-setup merge: its selection reports the sigma of the cluster's mean by default
         "campaign, merged": lambda: modaluq.identify_setups(
             simulate_campaign(4, durations=(120.0, 140.0, 110.0, 130.0, 150.0, 120.0)).frames(), fs=25.0,
@@ -58,7 +61,9 @@ CLUSTERING = [{}, {"linkage": "single"}, {"linkage": "complete", "distance_thres
               {"shape_representative": "median"}, {"shape_representative": "median", "cluster_std": "mean"},
               {"order_discrepancy": False}, {"order_discrepancy": False, "cluster_std": "mean"},
               {"drop_noise_twins": False}, {"drop_doublets": False}, {"drop_doublets": False, "drop_noise_twins": False},
-              {"reassign_borrowed_poles": False}, {"reassign_borrowed_poles": False, "drop_noise_twins": False}]
+              {"reassign_borrowed_poles": False}, {"reassign_borrowed_poles": False, "drop_noise_twins": False},
+              {"unanchored_noise_coupling": None}, {"unanchored_noise_coupling": 1.5, "cluster_std": "mean"},
+              {"unanchored_noise_coupling": 3.0, "representative": "lowest"}]
 
 
 @pytest.fixture(scope="module")
@@ -98,7 +103,8 @@ def assert_same_selection(core, ref):
     for name in ("frequency_hz", "damping_ratio", "frequency_std", "damping_std", "frequency_spread",
                  "damping_spread", "mode_shape_spread_real", "mode_shape_spread_imag", "min_mac"):
         np.testing.assert_allclose(getattr(core, name), getattr(ref, name), rtol=1e-9, atol=1e-13, err_msg=name)
-    for name in ("n_poles", "order_min", "order_max", "representative_order", "shape_order", "order_discrepancy"):
+    for name in ("n_poles", "order_min", "order_max", "representative_order", "shape_order", "order_discrepancy",
+                 "unanchored"):
         np.testing.assert_array_equal(getattr(core, name), getattr(ref, name), err_msg=name)
     assert core.settings.cluster_std == ref.settings.cluster_std
     if core.settings.cluster_std == "mean":  # the correlation of the mean, from the same rows
@@ -181,6 +187,32 @@ def test_a_lightly_damped_twin_born_above_the_noise_floor_is_dropped(results):
     assert abs(sel.dropped_twin_frequency_hz[k] - 17.01) < 0.2 and sel.dropped_twin_mac[k] < 0.8
     assert "1 lightly damped twin born of the noise" in str(sel)
     assert not any("born of the noise" in r for r in off.dropped_reason)
+
+
+def test_a_mode_with_no_pole_free_of_the_frozen_directions_takes_their_rho_sigma(results):
+    """Record 7215 of studies/selected_members_mc.py (input/output, k* 11, one below the true order):
+    the 1.9 Hz mode's poles have ρ 2.5-3.8 at every order, and their frozen σ_ξ (4e-4) is 3.5x
+    below the mode's scatter over records (1.4e-3, docs/validation.md issue 27 (n)). Its σ becomes
+    the poles' median ρ σ; no other mode moves."""
+    result = results["chain input/output, unanchored"]
+    d = modaluq.stabilization_diagram(result)
+    assert d.noise_coupling.shape == (d.n_poles,) and np.all(d.noise_coupling >= 1)
+    assert np.all(d.noise_coupling[d.order <= d.noise_floor_order] == 1)  # nothing frozen there
+    sel, off = d.select_modes(), d.select_modes(unanchored_noise_coupling=None)
+    assert sel.n_modes == off.n_modes and np.array_equal(sel.frequency_hz, off.frequency_hz)
+    k = int(np.argmin(np.abs(sel.frequency_hz - 1.93)))
+    assert np.flatnonzero(sel.unanchored).tolist() == [k] and not off.unanchored.any()
+    members = np.asarray(sel.members[k])
+    reliable = members[~d.noise_coupled[members] & ~d.close_singular_values[members]]
+    rho = d.noise_coupling[reliable]
+    assert rho.min() > 2
+    assert sel.damping_std[k] == pytest.approx(np.median(rho * d.damping_std[reliable]), rel=1e-12)
+    assert 1.2e-3 < sel.damping_std[k] < 1.8e-3 and off.damping_std[k] < 5e-4
+    others = np.arange(sel.n_modes) != k
+    np.testing.assert_array_equal(sel.frequency_std[others], off.frequency_std[others])
+    # the mode's covariance carries the raised σ, and the table says why
+    assert np.sqrt(sel.mode_covariance[k, 1, 1]) == pytest.approx(sel.damping_std[k], rel=1e-12)
+    assert "rho*std" in str(sel) and sel.UNANCHORED_LEGEND in str(sel)
 
 
 def test_a_modes_lowest_poles_taken_by_a_lightly_damped_cluster_are_given_back(results):

@@ -152,6 +152,17 @@ struct ClusteringOptions {
     /// do. Fires on about 5 % of the output-only and 2 % of the input/output modes of the
     /// simulations (docs/validation.md, issue 27 (h)).
     bool order_discrepancy = true;
+    /// A mode with no order below its own noise floor: when every reliable member of a cluster
+    /// (the cluster not mostly noise-coupled) has Poles::noise_coupling rho above this, none of its
+    /// poles is free of the frozen noise directions (k* below the mode's own singular values, a
+    /// weak mode), and their frozen sigma can be several times too small. The reported sigma_f and
+    /// sigma_xi become at least the median over those members of rho sigma, the unfrozen sigma's
+    /// bound (SelectedModes::unanchored). A mode read at some order <= k* has rho = 1 there. The
+    /// chain's 1.9 Hz input/output mode (k* = 11 < 12: rho 2.7-3.7 at every order, sigma_xi 3.5x
+    /// too small) and its 17 Hz output-only mode (k* = 8: rho 6.8-14); it fires on 3-7 % of the
+    /// simulations' weakest modes, and the 1.9 Hz xi coverage goes from 0.90 to 0.93
+    /// (docs/validation.md, issue 27 (n)). Empty, or poles without noise_coupling: no such rule.
+    std::optional<double> unanchored_noise_coupling = 2.0;
 
     void validate() const {
         detail::require(std::isfinite(distance_threshold) && distance_threshold > 0.0,
@@ -174,6 +185,10 @@ struct ClusteringOptions {
         if (max_frequency_std_per_bandwidth)
             detail::require(*max_frequency_std_per_bandwidth > 0.0, "max_frequency_std_per_bandwidth must be > 0, got ",
                             *max_frequency_std_per_bandwidth);
+        if (unanchored_noise_coupling)
+            detail::require(std::isfinite(*unanchored_noise_coupling) && *unanchored_noise_coupling >= 1.0,
+                            "unanchored_noise_coupling must be finite and >= 1 (rho is 1 where nothing is frozen), got ",
+                            *unanchored_noise_coupling);
     }
 };
 
@@ -261,6 +276,10 @@ struct SelectedModes {
     /// representative and the lowest sufficient member (ClusteringOptions::order_discrepancy):
     /// the estimate moves with the model order beyond its sigma
     BoolArray order_discrepancy;
+    /// per mode, every reliable member depends on the frozen noise directions (noise_coupling above
+    /// ClusteringOptions::unanchored_noise_coupling at every order): frequency_std and damping_std
+    /// are at least the members' median rho sigma
+    BoolArray unanchored;
     Index min_cluster_size = 0;             ///< the size threshold applied (the smallest, per cluster)
     /// the limit on sigma_f / (f xi) applied (NaN: no such test, or no uncertainty)
     double max_frequency_std_per_bandwidth = std::numeric_limits<double>::quiet_NaN();
@@ -677,6 +696,7 @@ inline SelectedModes select_modes(const Diagram& diagram, const ClusteringOption
     s.frequency_damping_correlation.setConstant(nm, nan);
     s.block_too_short.setConstant(nm, false);
     s.order_discrepancy.setConstant(nm, false);
+    s.unanchored.setConstant(nm, false);
     s.frequency_std_per_bandwidth.setConstant(nm, nan);
     s.frequency_hz.resize(nm);
     s.damping_ratio.resize(nm);
@@ -787,6 +807,23 @@ inline SelectedModes select_modes(const Diagram& diagram, const ClusteringOption
             s.frequency_std(k) = uf;
             s.damping_std(k) = uxi;
             s.frequency_damping_correlation(k) = uf > 0.0 && uxi > 0.0 ? u.head(nb).dot(u.tail(nb)) / (uf * uxi) : nan;
+        }
+        if (options.unanchored_noise_coupling && P.noise_coupling.size() == n && !mostly_coupled && !with_sigma.empty()) {
+            // Every reliable member's sigma is frozen where the mode's own directions are: their
+            // unfrozen bound rho sigma is the mode's (docs/validation.md, issue 27 (n)).
+            const bool unanchored = std::all_of(with_sigma.begin(), with_sigma.end(), [&](Index i) {
+                return P.noise_coupling(i) > *options.unanchored_noise_coupling;  // NaN: anchored, not judged
+            });
+            if (unanchored) {
+                std::vector<double> rf, rx;
+                for (Index i : with_sigma) {
+                    rf.push_back(P.noise_coupling(i) * P.frequency_std(i));
+                    rx.push_back(P.noise_coupling(i) * P.damping_std(i));
+                }
+                s.frequency_std(k) = std::max(s.frequency_std(k), detail::median(rf));
+                s.damping_std(k) = std::max(s.damping_std(k), detail::median(rx));
+                s.unanchored(k) = true;
+            }
         }
         if (options.order_discrepancy && sufficient != rep) {
             // Judged on the two poles' own sigma: one record's orders are positively correlated, so

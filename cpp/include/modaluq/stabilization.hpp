@@ -123,6 +123,9 @@ struct Poles {
     Eigen::VectorXd frequency_damping_correlation;
     /// Modes::block_too_short of each pole; may be empty (unknown: taken as false).
     BoolArray block_too_short;
+    /// Modes::noise_coupling of each pole (rho: unfrozen over frozen sigma, 1 at orders <= k*; NaN
+    /// without uncertainty); may be empty (unknown: the selection's unanchored rule is off).
+    Eigen::VectorXd noise_coupling;
     /// Modes::frequency_damping_factor of each pole: 2 n_b x n_poles, column i [u_f^T; u_xi^T] (Hz,
     /// fraction), the first-order factor rows of f and xi (2 n_b doubles per pole). May be empty
     /// (0 columns: unknown; the selection's ClusterStd::mean then falls back to the median).
@@ -142,9 +145,10 @@ struct Poles {
                             noise_coupled.size() == n,
                         "poles: every per-pole array must have ", n, " entries");
         detail::require((frequency_damping_correlation.size() == 0 || frequency_damping_correlation.size() == n) &&
-                            (block_too_short.size() == 0 || block_too_short.size() == n),
-                        "poles: frequency_damping_correlation and block_too_short must be empty or have ", n,
-                        " entries");
+                            (block_too_short.size() == 0 || block_too_short.size() == n) &&
+                            (noise_coupling.size() == 0 || noise_coupling.size() == n),
+                        "poles: frequency_damping_correlation, block_too_short and noise_coupling must be empty "
+                        "or have ", n, " entries");
         detail::require(frequency_damping_factor.cols() == 0 ||
                             (frequency_damping_factor.cols() == n && frequency_damping_factor.rows() % 2 == 0),
                         "poles: frequency_damping_factor must be empty or 2 n_b x ", n, ", got ",
@@ -200,6 +204,7 @@ inline Poles poles_of(const Identification& id) {
     p.noise_coupled.setConstant(n, false);
     p.frequency_damping_correlation.setConstant(n, nan);
     p.block_too_short.setConstant(n, false);
+    p.noise_coupling.setConstant(n, nan);
     Index at = 0;
     for (const Modes& m : id.modes) {
         p.orders.push_back(m.order);
@@ -219,6 +224,7 @@ inline Poles poles_of(const Identification& id) {
             if (m.frequency_damping_correlation.size() == k)
                 p.frequency_damping_correlation.segment(at, k) = m.frequency_damping_correlation;
             if (m.block_too_short.size() == k) p.block_too_short.segment(at, k) = m.block_too_short;
+            if (m.noise_coupling.size() == k) p.noise_coupling.segment(at, k) = m.noise_coupling;
             if (factor_rows > 0) p.frequency_damping_factor.middleCols(at, k) = m.frequency_damping_factor;
         }
         at += k;

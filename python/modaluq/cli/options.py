@@ -129,6 +129,10 @@ def add_analysis_options(p: argparse.ArgumentParser) -> None:
                         "is nearer to its median f and damping (done by default, before twins are dropped, so a "
                         "lightly damped cluster that took a mode's first poles is not kept as the mode; "
                         "docs/settings.md)")
+    g.add_argument("--no-unanchored-sigma", action="store_true",
+                   help="keep the frozen std of a mode none of whose poles is free of the frozen noise directions "
+                        "(noise coupling above 2 at every order: the noise floor is below the mode); by default its "
+                        "std is at least the poles' median rho*std, the table marks it 'rho*std' (docs/settings.md)")
 
 
 def _given(args, names) -> dict:
@@ -151,7 +155,8 @@ def analysis_settings(args) -> tuple:
                                         **({"order_discrepancy": False} if args.no_order_discrepancy else {}),
                                         **({"drop_noise_twins": False} if args.no_drop_noise_twins else {}),
                                         **({"reassign_borrowed_poles": False} if args.no_reassign_borrowed_poles
-                                           else {}))
+                                           else {}),
+                                        **({"unanchored_noise_coupling": None} if args.no_unanchored_sigma else {}))
     except (TypeError, ValueError) as exc:  # "min_mac must be ..." -> "--min-mac must be ..."
         raise option_error(exc, options) from None
     return settings, criteria, clustering

@@ -55,9 +55,9 @@ def settle_seconds() -> float:
 #: Settings added after monitoring stores were made, with the value that gives the behaviour from
 #: before them: a part's fingerprint leaves them out at that value (``--no-order-discrepancy``
 #: with ``--no-drop-noise-twins`` resumes a store made before 2026-11-27, ``--no-reassign-borrowed-poles``
-#: one made before 2026-11-28; docs/monitoring.md).
+#: one made before 2026-11-28, ``--no-unanchored-sigma`` one made before 2026-12-07; docs/monitoring.md).
 ADDED_SETTINGS = {"clustering": {"order_discrepancy": False, "drop_noise_twins": False,
-                                 "reassign_borrowed_poles": False}}
+                                 "reassign_borrowed_poles": False, "unanchored_noise_coupling": None}}
 
 
 @dataclass(frozen=True)

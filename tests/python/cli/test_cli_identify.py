@@ -358,3 +358,12 @@ def test_a_clustering_switch_reaches_the_selection(small_csv, option, key):
     assert json.loads(out.read_text())["clustering"]["clustering"][key] is False
     assert main(["identify", str(small_csv), "--out", str(out), "--overwrite", *FAST_ARGS]) == 0
     assert json.loads(out.read_text())["clustering"]["clustering"][key] is True
+
+
+def test_the_unanchored_switch_reaches_the_selection(small_csv):
+    # docs/settings.md: --no-unanchored-sigma is unanchored_noise_coupling None, recorded with the modes
+    out = small_csv.parent / "modes.json"
+    assert main(["identify", str(small_csv), "--out", str(out), "--no-unanchored-sigma", *FAST_ARGS]) == 0
+    assert json.loads(out.read_text())["clustering"]["clustering"]["unanchored_noise_coupling"] is None
+    assert main(["identify", str(small_csv), "--out", str(out), "--overwrite", *FAST_ARGS]) == 0
+    assert json.loads(out.read_text())["clustering"]["clustering"]["unanchored_noise_coupling"] == 2.0

@@ -79,13 +79,15 @@ def test_resume_runs_nothing_done_and_refuses_other_settings(campaign, tmp_path)
 
 
 def test_a_store_made_before_a_setting_was_added_resumes_with_its_old_value(campaign, tmp_path):
-    """A store made before order_discrepancy, drop_noise_twins and reassign_borrowed_poles existed:
-    its parts' fingerprint has no such keys. The defaults (True) are refused by name; all False
-    (--no-order-discrepancy --no-drop-noise-twins --no-reassign-borrowed-poles) is the fingerprint
-    it was made with, and its parts serve."""
+    """A store made before order_discrepancy, drop_noise_twins, reassign_borrowed_poles and
+    unanchored_noise_coupling existed: its parts' fingerprint has no such keys. The defaults are
+    refused by name; all off (--no-order-discrepancy --no-drop-noise-twins
+    --no-reassign-borrowed-poles --no-unanchored-sigma) is the fingerprint it was made with, and its
+    parts serve."""
     from modaluq.monitoring.worker import ADDED_SETTINGS, TaskConfig
 
-    old = modaluq.ClusteringSettings(order_discrepancy=False, drop_noise_twins=False, reassign_borrowed_poles=False)
+    old = modaluq.ClusteringSettings(order_discrepancy=False, drop_noise_twins=False, reassign_borrowed_poles=False,
+                                     unanchored_noise_coupling=None)
     fingerprint = TaskConfig(settings=SETTINGS, clustering=old).fingerprint()
     assert set(ADDED_SETTINGS["clustering"]).isdisjoint(fingerprint["clustering"])  # as before the key
     out = tmp_path / "t.nc"
@@ -99,9 +101,13 @@ def test_a_store_made_before_a_setting_was_added_resumes_with_its_old_value(camp
     with pytest.raises(ValueError, match=r"clustering\.drop_noise_twins\b.*differ"):
         monitor(campaign.records[:6], settings=SETTINGS, out=out, progress=False, tracking=tracking,
                 clustering=modaluq.ClusteringSettings(order_discrepancy=False))
-    with pytest.raises(ValueError, match=r"clustering\.reassign_borrowed_poles differ"):
+    with pytest.raises(ValueError, match=r"clustering\.reassign_borrowed_poles\b.*differ"):
         monitor(campaign.records[:6], settings=SETTINGS, out=out, progress=False, tracking=tracking,
                 clustering=modaluq.ClusteringSettings(order_discrepancy=False, drop_noise_twins=False))
+    with pytest.raises(ValueError, match=r"clustering\.unanchored_noise_coupling differ"):
+        monitor(campaign.records[:6], settings=SETTINGS, out=out, progress=False, tracking=tracking,
+                clustering=modaluq.ClusteringSettings(order_discrepancy=False, drop_noise_twins=False,
+                                                      reassign_borrowed_poles=False))
     again = monitor(campaign.records[:6], settings=SETTINGS, clustering=old, out=out, progress=False,
                     tracking=tracking)
     assert first.n_run == 6 and again.n_run == 0
