@@ -29,7 +29,6 @@ from __future__ import annotations
 
 import pathlib
 import sys
-import time
 import warnings
 
 import numpy as np
@@ -37,13 +36,12 @@ import numpy as np
 from modaluq.identification import identify
 from modaluq.results import ModalUQWarning
 from modaluq.settings import Settings
-from modaluq.simulate import simulate
-from modaluq.validation.montecarlo import match_modes, record_seed
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "tests" / "python"))
-from above_order_diagnosis import _stats, finish, record_done, record_maps, reprint, study_parser  # noqa: E402
-from bootstrap_sigma_mc import COVERAGE_BAND, MEDIAN_BAND, METHODS, N_BLOCKS, N_SAMPLES, STRUCTURES, P  # noqa: E402
+from above_order_diagnosis import _stats, finish, record_maps, reprint, study_parser  # noqa: E402
+from bootstrap_sigma_mc import COVERAGE_BAND, MEDIAN_BAND, METHODS, N_BLOCKS, STRUCTURES, P  # noqa: E402
+from partial_unfreeze_mc import run_records  # noqa: E402
 
 import oracle  # noqa: E402
 
@@ -109,50 +107,38 @@ def _shape(maps):
     return b, b
 
 
+def record_spreads(y, u, fs, orders, draws=DRAWS):
+    """One record for :func:`partial_unfreeze_mc.run_records`: the oracle's poles per order with
+    the core's σ and noise-coupling flag of the same pole (the core's poles equal the oracle's),
+    and the spreads of :func:`draw_spreads`."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ModalUQWarning)
+        core = identify(y, u, fs=fs, settings=Settings(block_rows=P, orders=orders, n_blocks=N_BLOCKS))
+    maps = record_maps(y, u, fs, orders)
+    sp = draw_spreads(maps, y.shape[1], fs, orders, draws)
+    out = {"k_star": maps["k_star"]}
+    for n in orders:
+        cm, f = core.at_order(n), maps[n]["f"]
+        c = (np.argmin(np.abs(cm.frequency_hz[None, :] - f[:, None]), axis=1) if cm.n_modes
+             else np.zeros(f.size, int))
+        same = cm.n_modes > 0 and np.abs(cm.frequency_hz[c] - f) <= 1e-6 * f
+        out[n] = {"f": f, "xi": maps[n]["xi"], "s_lin": sp[n]["lin"], "s_mad": np.moveaxis(sp[n]["mad"], 0, 1),
+                  "s_cv": np.moveaxis(sp[n]["cv"], 0, 1), "corr": sp[n]["corr"],
+                  "s_core": np.where(same[:, None], np.stack([cm.frequency_std[c], cm.damping_std[c]], axis=1)
+                                     if cm.n_modes else np.nan, np.nan),
+                  "flag": np.where(same, cm.noise_coupled[c] if cm.n_modes else False, False).astype(float)}
+    return out
+
+
 def run(n_records, structure="chain", seed=0, draws=DRAWS, progress=True, max_seconds=None):
     kw, orders = STRUCTURES[structure]
-    truth = simulate(N_SAMPLES, seed=record_seed(seed, 0), **kw)
-    nt, C = truth.frequency_hz.size, len(DRAW_COUNTS)
-    M, O, R = len(METHODS), len(orders), n_records
-    settings = Settings(block_rows=P, orders=orders, n_blocks=N_BLOCKS)
-    res = {"f": np.full((M, O, R, nt), np.nan), "xi": np.full((M, O, R, nt), np.nan),
-           "flag": np.zeros((M, O, R, nt), bool), "s_core": np.full((M, O, R, nt, 2), np.nan),
-           "s_lin": np.full((M, O, R, nt, 2), np.nan), "s_mad": np.full((M, O, R, nt, C, 2), np.nan),
-           "s_cv": np.full((M, O, R, nt, C, 2), np.nan),
-           "corr": np.full((M, O, R, nt, 2), np.nan), "k_star": np.zeros((M, R), int)}
-    t0 = time.perf_counter()
-    done = 0
-    for k in range(R):
-        sim = simulate(N_SAMPLES, seed=record_seed(seed, k), **kw)
-        for m, u in enumerate((None, sim.u)):
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore", ModalUQWarning)
-                core = identify(sim.y, u, fs=sim.fs, settings=settings)
-            maps = record_maps(sim.y, u, sim.fs, orders)
-            sp = draw_spreads(maps, sim.y.shape[1], sim.fs, orders, draws)
-            res["k_star"][m, k] = maps["k_star"]
-            for o, n in enumerate(orders):
-                cm = core.at_order(n)
-                idx = match_modes(maps[n]["f"], truth.frequency_hz)
-                ic = match_modes(cm.frequency_hz, truth.frequency_hz)
-                for i in np.flatnonzero((idx >= 0) & (ic >= 0)):
-                    j, c = idx[i], ic[i]
-                    res["f"][m, o, k, i], res["xi"][m, o, k, i] = maps[n]["f"][j], maps[n]["xi"][j]
-                    res["s_core"][m, o, k, i] = cm.frequency_std[c], cm.damping_std[c]
-                    res["flag"][m, o, k, i] = cm.noise_coupled[c]
-                    res["s_lin"][m, o, k, i] = sp[n]["lin"][j]
-                    res["s_mad"][m, o, k, i] = sp[n]["mad"][:, j]
-                    res["s_cv"][m, o, k, i] = sp[n]["cv"][:, j]
-                    res["corr"][m, o, k, i] = sp[n]["corr"][j]
-        done = k + 1
-        if record_done(k, R, t0, progress, max_seconds):
-            break
-    for key in ("f", "xi", "flag", "s_core", "s_lin", "s_mad", "s_cv", "corr"):
-        res[key] = res[key][:, :, :done]
-    res["k_star"] = res["k_star"][:, :done]
-    res["orders"], res["counts"] = np.array(orders), np.array(DRAW_COUNTS)
+    C = len(DRAW_COUNTS)
+    res = run_records(n_records, kw, orders, seed, progress, max_seconds,
+                      lambda y, u, fs, orders: record_spreads(y, u, fs, orders, draws),
+                      {"flag": (), "s_core": (2,), "s_lin": (2,), "s_mad": (C, 2), "s_cv": (C, 2), "corr": (2,)})
+    res["flag"] = res["flag"] == 1
+    res["counts"] = np.array(DRAW_COUNTS)
     res["structure"] = np.array(structure)
-    res["seconds"] = time.perf_counter() - t0
     return res
 
 
