@@ -72,6 +72,8 @@ def selected_modes_to_dict(selected) -> dict:
             "noise_coupled": bool(noise_coupled[i]),
             # σ widened by the model order's effect (SelectedModes.order_discrepancy)
             "order_discrepancy": bool(selected.order_discrepancy[i]),
+            # σ raised to the poles' unfrozen bound ρσ (SelectedModes.unanchored)
+            "unanchored": bool(selected.unanchored[i]),
             "mpc": num(selected.mpc[i]), "mpc_std": num(selected.mpc_std[i]),
             "mpd_deg": num(selected.mpd_deg[i]), "mpd_std_deg": num(selected.mpd_std_deg[i]),
             "mode_shape": shape,
@@ -157,6 +159,10 @@ def diagram_to_xarray(diagram, selected=None, attrs: dict | None = None, geometr
             ("mode",), np.asarray(sel.order_discrepancy, np.int8),
             {"long_name": "the std of f or xi includes the difference between the representative and the lowest "
                           "sufficient order, which exceeded 1.96 of the two poles' combined std"})
+        pole_vars["selected_unanchored"] = (
+            ("mode",), np.asarray(sel.unanchored, np.int8),
+            {"long_name": "every pole of the mode depends on the frozen noise directions (noise coupling above "
+                          "unanchored_noise_coupling at every order): the std are the poles' unfrozen bound rho*std"})
         for name, values in (("mode_shape_real", sel.mode_shape.real), ("mode_shape_imag", sel.mode_shape.imag),
                              ("mode_shape_std_real", sel.mode_shape_std_real),
                              ("mode_shape_std_imag", sel.mode_shape_std_imag),
@@ -222,6 +228,8 @@ def report(diagram, selected, *, stamp: dict | None = None, extra: dict | None =
                                          "representative's order and at its lowest sufficient order, which "
                                          "exceeded 1.96 of the two poles' combined std: the estimate moves with "
                                          "the model order",
+                    "unanchored": "every pole of the mode depends on the frozen noise directions (the noise floor "
+                                  "k* is below the mode): its std are at least the poles' unfrozen bound rho*std",
                     "low_signal_to_noise": "H is within 3 std of its estimation noise: the modes cannot be told "
                                            "from noise",
                     "mpc": "modal phase collinearity (1: real shape), std to second order",

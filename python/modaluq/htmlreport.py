@@ -254,6 +254,8 @@ def _table(selected) -> str:
     flags = np.asarray(getattr(selected, "noise_coupled", np.zeros(selected.n_modes, bool)), bool)
     # σ widened by the model order (SelectedModes.order_discrepancy), as the printed table says
     widened = np.asarray(getattr(selected, "order_discrepancy", np.zeros(selected.n_modes, bool)), bool)
+    # σ raised to the poles' ρσ (SelectedModes.unanchored), as the printed table says
+    unanchored = np.asarray(getattr(selected, "unanchored", np.zeros(selected.n_modes, bool)), bool)
     indicators = {}
     for name, (_, std_name) in INDICATOR_COLUMNS.items():
         values = getattr(selected, name, None)
@@ -271,7 +273,8 @@ def _table(selected) -> str:
                  str(int(selected.representative_order[k])), str(int(selected.n_poles[k]))]
         cells += [str(int(shape_order[k]))] if with_shape_order else []
         cells += [f"{_fmt(v[k], 3)} ± {_fmt(sd[k], 2)}" for v, sd in indicators.values()]
-        cells.append(" ".join(w for w, on in (("noise?", flags[k]), ("widened", widened[k])) if on))
+        cells.append(" ".join(w for w, on in (("noise?", flags[k]), ("widened", widened[k]),
+                                              ("rho*std", unanchored[k])) if on))
         rows.append("<tr>" + "".join(f"<td>{html.escape(c)}</td>" for c in cells) + "</tr>")
     head = ["mode", "f [Hz]", "σ f [Hz]", "spread f", "ξ [%]", "σ ξ [%]", "spread ξ", "order", "poles"]
     head += ["shape order"] if with_shape_order else []
@@ -340,7 +343,9 @@ def write_html_report(path, diagram, selected, *, geometry=None, spectrum=None, 
              f"<p class='note'>σ: analytic (delta-method) standard deviation, {selected.std_words}; spread: "
              "standard deviation across the cluster's poles. noise?: every pole of the mode is noise-coupled. "
              "widened: f or ξ at the representative's order and at the lowest sufficient order differ by more "
-             "than 1.96 of the two poles' combined σ, and σ includes that difference.</p>"]
+             "than 1.96 of the two poles' combined σ, and σ includes that difference. rho*std: every pole of the "
+             "mode depends on the frozen noise directions (the noise floor is below the mode), and σ is their "
+             "unfrozen bound ρσ.</p>"]
     if selected.n_modes > 1:
         parts.append("<h2>MAC matrix</h2>" + div(_mac_figure(go, selected)))
     if selected.n_modes:

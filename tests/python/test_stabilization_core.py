@@ -213,6 +213,10 @@ def test_a_mode_with_no_pole_free_of_the_frozen_directions_takes_their_rho_sigma
     # the mode's covariance carries the raised σ, and the table says why
     assert np.sqrt(sel.mode_covariance[k, 1, 1]) == pytest.approx(sel.damping_std[k], rel=1e-12)
     assert "rho*std" in str(sel) and sel.UNANCHORED_LEGEND in str(sel)
+    # and the exports carry the flag (JSON per mode, netCDF per selected mode)
+    from modaluq.export import diagram_to_xarray, selected_modes_to_dict
+    assert [m["unanchored"] for m in selected_modes_to_dict(sel)["modes"]] == sel.unanchored.tolist()
+    assert diagram_to_xarray(d, sel)["selected_unanchored"].values.tolist() == sel.unanchored.astype(int).tolist()
 
 
 def test_a_modes_lowest_poles_taken_by_a_lightly_damped_cluster_are_given_back(results):
