@@ -526,7 +526,7 @@ class ClusteringSettings:
         lie below the noise floor k* (a weak mode) and every pole's frozen σ misses them. The mode's
         σ_f and σ_ξ become at least the median of ρ σ over those poles, the unfrozen σ's bound,
         and ``SelectedModes.unanchored`` says so. On the paper's chain it fires on 7 % of the
-        1.9 Hz input/output modes (k* = 11 < 12, ρ 2.7–3.7 at every order, σ_ξ 3.5× too small)
+        1.9 Hz input/output modes (k* = 11 < 12, ρ 2.5–5.5 at every order, σ_ξ 3.5× too small)
         and 5 % of the 17 Hz output-only ones, and lifts the coverage of ±1.96 σ of the engineer's
         call's worst cell, that mode's input/output ξ, from 0.90 to 0.93 (docs/validation.md, issue
         27 (n)). None: no such rule (as before 2026-12-07).

@@ -191,7 +191,7 @@ def test_a_lightly_damped_twin_born_above_the_noise_floor_is_dropped(results):
 
 def test_a_mode_with_no_pole_free_of_the_frozen_directions_takes_their_rho_sigma(results):
     """Record 7215 of studies/selected_members_mc.py (input/output, k* 11, one below the true order):
-    the 1.9 Hz mode's poles have ρ 2.5-3.8 at every order, and their frozen σ_ξ (4e-4) is 3.5x
+    the 1.9 Hz mode's poles have ρ 2.5-5.5 at every order, and their frozen σ_ξ (4e-4) is 3.5x
     below the mode's scatter over records (1.4e-3, docs/validation.md issue 27 (n)). Its σ becomes
     the poles' median ρ σ; no other mode moves."""
     result = results["chain input/output, unanchored"]

@@ -158,7 +158,7 @@ struct ClusteringOptions {
     /// weak mode), and their frozen sigma can be several times too small. The reported sigma_f and
     /// sigma_xi become at least the median over those members of rho sigma, the unfrozen sigma's
     /// bound (SelectedModes::unanchored). A mode read at some order <= k* has rho = 1 there. The
-    /// chain's 1.9 Hz input/output mode (k* = 11 < 12: rho 2.7-3.7 at every order, sigma_xi 3.5x
+    /// chain's 1.9 Hz input/output mode (k* = 11 < 12: rho 2.5-5.5 at every order, sigma_xi 3.5x
     /// too small) and its 17 Hz output-only mode (k* = 8: rho 6.8-14); it fires on 3-7 % of the
     /// simulations' weakest modes, and the 1.9 Hz xi coverage goes from 0.90 to 0.93
     /// (docs/validation.md, issue 27 (n)). Empty, or poles without noise_coupling: no such rule.
