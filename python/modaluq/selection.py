@@ -511,7 +511,7 @@ def _shape_indicators(diagram, modes: SelectedModes) -> dict:
         if all(c is not None for c in found):
             covs = np.stack(found)
             # per mode: one whose shape pole is its representative keeps that pole's covariance,
-            # unless its σ are the cluster mean's or were widened by the model order
+            # unless its σ are the cluster mean's, were widened by the model order or raised to ρσ
             which = (np.asarray(modes.shape_pole) != np.asarray(modes.representative_pole)) | (
                 modes.settings.cluster_std == "mean") | modes.order_discrepancy | modes.unanchored
             covs = _with_cluster_std(covs, modes, which)
