@@ -50,9 +50,6 @@ def nearest_mode(sel, f0):
 def _mode_rows(res, truth):
     """Per true mode: a dict of each variant's (f, σ_f, ξ, σ_ξ) and the default's cluster members."""
     d = res.stabilization_diagram()
-    # ρ (noise_coupling) of every pole, flattened as the diagram's poles are (order by order)
-    rho = np.concatenate([np.full(m.n_modes, np.nan) if m.noise_coupling is None else m.noise_coupling
-                          for m in res.modes])
     sels = {v: res.select_modes(settings=c) for v, c in VARIANTS.items()}
     rows = []
     for f0 in truth:
@@ -67,7 +64,7 @@ def _mode_rows(res, truth):
                 m = np.asarray(sel.members[j])
                 row["members"] = dict(order=d.order[m], f=d.frequency_hz[m], xi=d.damping_ratio[m],
                                       sf=d.frequency_std[m], sxi=d.damping_std[m],
-                                      coupled=d.noise_coupled[m], rho=rho[m], rep=int(sel.representative_pole[j]),
+                                      coupled=d.noise_coupled[m], rho=d.noise_coupling[m], rep=int(sel.representative_pole[j]),
                                       rep_index=int(np.flatnonzero(m == sel.representative_pole[j])[0]))
         row["k_star"] = int(d.noise_floor_order)
         row["n_selected"] = {v: sel.n_modes for v, sel in sels.items()}

@@ -440,7 +440,8 @@ def select_modes_reference(diagram: Diagram, settings: ClusteringSettings | None
         med = np.median(f[members])
         # the representative's σ is read from it: not at a cut inside a cluster, not noise-coupled
         # (unless most of the cluster is: then the coupled poles count, with their unfrozen σ)
-        coupled = diagram.noise_coupled[members] & ~(2 * diagram.noise_coupled[members].sum() > members.size)
+        mostly = 2 * diagram.noise_coupled[members].sum() > members.size
+        coupled = diagram.noise_coupled[members] & ~mostly
         candidates = members[~(diagram.close_singular_values[members] | coupled)]
         if candidates.size == 0:
             candidates = members
@@ -484,7 +485,6 @@ def select_modes_reference(diagram: Diagram, settings: ClusteringSettings | None
                 rho[k] = diagram.frequency_damping_correlation[rep[k]]
         # a mode with no order below its own noise floor: every reliable pole's rho above the limit
         # gives the mode at least their median rho sigma (the unfrozen bound)
-        mostly = 2 * diagram.noise_coupled[members].sum() > members.size
         limit = settings.unanchored_noise_coupling
         rhos = diagram.noise_coupling
         if limit is not None and rhos.size == diagram.n_poles and not mostly and reliable.size \
