@@ -40,6 +40,12 @@ shapes with both shapes' covariances, ``modaluq.indicators.mac_test``): RMS z_MA
 5 % of the pairs rejected at 5 % if the shapes' σ are right. The pairing's MAC >= 0.8 truncates
 z_MAC as the tolerance truncates z_f.
 
+``--fixed-orders`` (issue 27 (o)) asks instead *which* σ the pairs test: for every mode pair, every
+model order both halves' clusters hold is compared pole against pole with each pole's own σ (the
+per-order σ, a fixed-order estimator), beside the selected modes' z with the default σ (the median of
+the members' σ), with the σ of the members' mean (``cluster_std="mean"``, (12.14) of uq-math.md) and
+the members' median correlation of their ξ factor rows (1: the orders move together).
+
 Usage: OPENBLAS_NUM_THREADS=1 python studies/split_halves_pool.py [DATA_DIR] [--out pairs.csv]
 (default ../shared/data; about 1 min on one core). docs/validation.md quotes its table.
 """
@@ -53,6 +59,7 @@ import numpy as np
 
 import modaluq
 from modaluq.analysis import Analysis
+from modaluq.comparison import compare_modes
 from modaluq.harmonics import possible_harmonics
 from modaluq.io import load
 from modaluq.validation import split_halves_windows
@@ -104,6 +111,8 @@ def _clustering(representative):
         return modaluq.ClusteringSettings(order_discrepancy=False)
     if representative == "no-unanchored":  # the default but unanchored_noise_coupling (before 2026-12-07)
         return modaluq.ClusteringSettings(unanchored_noise_coupling=None)
+    if representative == "cluster-mean":  # the default but the cluster's mean sigma (12.14), not the median
+        return modaluq.ClusteringSettings(cluster_std="mean")
     if representative in ("shape-lowest", "shape-median"):
         return modaluq.ClusteringSettings(shape_representative=representative.split("-")[1])
     return modaluq.ClusteringSettings(representative=representative)
@@ -114,7 +123,7 @@ def pairs_of_record(name, data, levels=LEVELS, tolerance=0.02, representative="m
     windows; ``representative`` is ``ClusteringSettings.representative``, or "shape-lowest" /
     "shape-median" for the median representative with that ``shape_representative`` ("median" and
     "shape-lowest" are the default since 2026-11-27, "shape-median" the default before), or
-    "no-order-check" for the default with ``order_discrepancy=False``, "no-noise-twins" with
+    "no-order-check" for the default with ``order_discrepancy=False``, "cluster-mean" with ``cluster_std="mean"``, "no-noise-twins" with
     ``drop_noise_twins=False``, "no-pole-reassign" with ``reassign_borrowed_poles=False``; ``pair_within_std`` is ``split_halves``' (0: the 2 % window alone)."""
     group, read, band = RECORDS[name]
     y, fs = read(data)
@@ -145,6 +154,123 @@ def pairs_of_record(name, data, levels=LEVELS, tolerance=0.02, representative="m
                 mac_p_value=check.mac_p_value[m],
                 harmonic=bool(harmonic[m]), rms_ratio=ratio))
     return rows, failed
+
+
+def _halves(a, t0, t1):
+    """The two halves of [t0, t1) of ``a`` run as ``split_halves`` runs them (the second exactly as
+    the first was identified)."""
+    runs = []
+    for start, stop in ((t0, 0.5 * (t0 + t1)), (0.5 * (t0 + t1), t1)):
+        half = a.with_settings(start=start, stop=stop)
+        runs.append((half.identified_like(runs[0]) if runs else half).run(check_harmonics=False, issue_warnings=False))
+    return runs
+
+
+def _row_correlation(factor):
+    """Mean correlation between distinct rows of ``factor`` (members × blocks): 1 when the members'
+    first-order moves are one."""
+    k = len(factor)
+    if k < 2:
+        return np.nan
+    x = factor / np.linalg.norm(factor, axis=1, keepdims=True)
+    g = x @ x.T
+    return float((g.sum() - k) / (k * (k - 1)))
+
+
+def _lag1(u):
+    """ρ₁ of (3.4) of uq-math.md §3.1 for one factor row (blocks in time order), with its +1/n_b."""
+    u = u - u.mean()
+    return float(u[:-1] @ u[1:] / (u @ u) + 1 / len(u))
+
+
+def fixed_order_pairs(name, data, levels=LEVELS):
+    """Issue 27 (o): for each mode pair of each window of one record (paired as ``split_halves`` pairs
+    them, default settings), the z of f and ξ of the two halves' poles at every order both clusters
+    hold (each pole's own σ), and the selected modes' z with the default σ and with
+    ``cluster_std="mean"``, and the lag-1 block correlation ρ₁ of both representatives' rows;
+    returns (pair dicts, order dicts)."""
+    group, read, band = RECORDS[name]
+    y, fs = read(data)
+    a = Analysis.from_arrays(y, fs=fs, settings=modaluq.Settings(frequency_range=band))
+    mean_std = modaluq.ClusteringSettings(cluster_std="mean")
+    pairs, orders = [], []
+    length = len(y) / fs
+    for n in levels:
+        for k in range(n):
+            try:
+                runs = _halves(a, k * length / n, (k + 1) * length / n)
+            except ValueError:  # a window too short for the automatic settings: no pair, as in the pool
+                continue
+            c = compare_modes(runs[0].selected, runs[1].selected)
+            means = [modaluq.select_modes(r.diagram, mean_std) for r in runs]
+            k_star = max(r.diagram.noise_floor_order for r in runs)
+            for m in range(len(c.mac)):
+                clusters, pair = [], dict(group=group, record=name, n_windows=n, window=k)
+                for h, (run, mean) in enumerate(zip(runs, means)):
+                    sel, d = run.selected, run.diagram
+                    j = int(np.argmin(np.abs(sel.frequency_hz - c.frequency_hz[m, h])))
+                    jm = int(np.argmin(np.abs(mean.frequency_hz - sel.frequency_hz[j])))
+                    members = np.asarray(sel.members[j])
+                    rep = sel.representative_pole[j]
+                    pair[f"lag1_f{h}"], pair[f"lag1_xi{h}"] = (_lag1(u) for u in d.frequency_damping_factor[rep])
+                    clusters.append({int(d.order[i]): i for i in members})
+                    pair |= {f"f{h}": sel.frequency_hz[j], f"xi{h}": sel.damping_ratio[j],
+                             f"sigma_f{h}": sel.frequency_std[j], f"sigma_xi{h}": sel.damping_std[j],
+                             f"mean_sigma_f{h}": mean.frequency_std[jm], f"mean_sigma_xi{h}": mean.damping_std[jm],
+                             f"row_correlation{h}": _row_correlation(d.frequency_damping_factor[members, 1])}
+                pair["z_f"], pair["z_xi"] = c.z_frequency[m], c.z_damping[m]
+                pair["z_f_mean"] = (pair["f0"] - pair["f1"]) / np.hypot(pair["mean_sigma_f0"], pair["mean_sigma_f1"])
+                pair["z_xi_mean"] = (pair["xi0"] - pair["xi1"]) / np.hypot(pair["mean_sigma_xi0"], pair["mean_sigma_xi1"])
+                z = []
+                for o in sorted(set(clusters[0]) & set(clusters[1])):
+                    (d0, i0), (d1, i1) = (runs[0].diagram, clusters[0][o]), (runs[1].diagram, clusters[1][o])
+                    z.append((o, (d0.frequency_hz[i0] - d1.frequency_hz[i1]) / np.hypot(d0.frequency_std[i0], d1.frequency_std[i1]),
+                              (d0.damping_ratio[i0] - d1.damping_ratio[i1]) / np.hypot(d0.damping_std[i0], d1.damping_std[i1]),
+                              max(d0.noise_coupling[i0], d1.noise_coupling[i1])))
+                    orders.append(dict(record=name, n_windows=n, order=o, above_noise_floor=o > k_star,
+                                       z_f=z[-1][1], z_xi=z[-1][2], noise_coupling=z[-1][3]))
+                z = np.array([t[1:3] for t in z], float).reshape(-1, 2)
+                pair["fixed_z_f"], pair["fixed_z_xi"] = (np.sqrt(np.mean(z ** 2, 0)) if len(z) else (np.nan, np.nan))
+                pair["common_orders"] = len(z)
+                pairs.append(pair)
+    return pairs, orders
+
+
+def _rms(values):
+    v = np.asarray(values, float)
+    v = v[np.isfinite(v)]
+    return np.sqrt(np.mean(v ** 2)) if v.size else np.nan
+
+
+def print_fixed_orders(pairs, orders):
+    """The table of issue 27 (o): RMS z of the same pairs read three ways."""
+    print("| record | pairs | orders compared | fixed order: RMS z f, ξ (per pair over its common orders) | "
+          "fixed order, above k*: RMS z f, ξ | selected, default σ: RMS z f, ξ | selected, σ of the mean: "
+          "RMS z f, ξ | members' ξ-row correlation (median) |")
+    print("|---|---|---|---|---|---|---|---|")
+    for name in dict.fromkeys(p["record"] for p in pairs):
+        mine = [p for p in pairs if p["record"] == name]
+        o = [r for r in orders if r["record"] == name and r["above_noise_floor"]]
+        corr = np.nanmedian([p[f"row_correlation{h}"] for p in mine for h in (0, 1)])
+        print(f"| {name} | {len(mine)} | {sum(p['common_orders'] for p in mine)} | "
+              f"{_rms([p['fixed_z_f'] for p in mine]):.2f}, {_rms([p['fixed_z_xi'] for p in mine]):.2f} | "
+              f"{_rms([r['z_f'] for r in o]):.2f}, {_rms([r['z_xi'] for r in o]):.2f} | "
+              f"{_rms([p['z_f'] for p in mine]):.2f}, {_rms([p['z_xi'] for p in mine]):.2f} | "
+              f"{_rms([p['z_f_mean'] for p in mine]):.2f}, {_rms([p['z_xi_mean'] for p in mine]):.2f} | {corr:.2f} |")
+    print("\nBy number of windows (fixed order, every common order; selected, default σ; the lag-1 block "
+          "correlation ρ₁ of the representatives' f and ξ rows, mean ± its standard error):\n")
+    print("| record | windows | orders compared | fixed order: RMS z f, ξ | pairs | selected: RMS z f, ξ | ρ₁ f | ρ₁ ξ |")
+    print("|---|---|---|---|---|---|---|---|")
+    for name in dict.fromkeys(p["record"] for p in pairs):
+        for n in sorted({p["n_windows"] for p in pairs if p["record"] == name}):
+            o = [r for r in orders if r["record"] == name and r["n_windows"] == n]
+            mine = [p for p in pairs if p["record"] == name and p["n_windows"] == n]
+            lag = {key: np.array([p[f"lag1_{key}{h}"] for p in mine for h in (0, 1)]) for key in ("f", "xi")}
+            lag = {key: f"{v.mean():+.2f} ± {v.std(ddof=1) / np.sqrt(len(v)):.2f}" if len(v) > 1 else "—"
+                   for key, v in lag.items()}
+            print(f"| {name} | {n} | {len(o)} | {_rms([r['z_f'] for r in o]):.2f}, {_rms([r['z_xi'] for r in o]):.2f} | "
+                  f"{len(mine)} | {_rms([p['z_f'] for p in mine]):.2f}, {_rms([p['z_xi'] for p in mine]):.2f} | "
+                  f"{lag['f']} | {lag['xi']} |")
 
 
 def stats(rows):
@@ -222,14 +348,28 @@ def print_tables(rows, failed, levels=LEVELS):
 
 
 def main(data_dir="../shared/data", out=None, records=tuple(RECORDS), levels=LEVELS, tolerance=0.02,
-         representative="median", pair_within_std=4.0):
+         representative="median", pair_within_std=4.0, fixed_orders=False):
     """Run every record of ``records`` at every level of ``levels``, print the tables, write the
-    pairs to ``out`` (CSV) if given; returns (rows, failed)."""
+    pairs to ``out`` (CSV) if given; returns (rows, failed). With ``fixed_orders`` print the table of
+    :func:`fixed_order_pairs` instead and return its (pairs, orders)."""
     data = Path(data_dir)
-    rows, failed = [], []
     for name in records:
         if name not in RECORDS:
             raise ValueError(f"record {name!r}: one of {tuple(RECORDS)}")
+    if fixed_orders:
+        pairs, orders = [], []
+        for name in records:
+            t = time.perf_counter()
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                p, o = fixed_order_pairs(name, data, levels)
+            pairs += p
+            orders += o
+            print(f"{name}: {len(p)} pairs, {len(o)} orders compared, {time.perf_counter() - t:.1f} s", file=sys.stderr)
+        print_fixed_orders(pairs, orders)
+        return pairs, orders
+    rows, failed = [], []
+    for name in records:
         t = time.perf_counter()
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
@@ -253,17 +393,22 @@ if __name__ == "__main__":
     p.add_argument("--levels", type=int, nargs="+", default=list(LEVELS), help="numbers of windows (default 1 2 4 8)")
     p.add_argument("--tolerance", type=float, default=0.02, help="pairing: largest relative frequency difference")
     p.add_argument("--representative", choices=("median", "lowest", "shape-lowest", "shape-median", "no-order-check",
-                                                "no-noise-twins", "no-pole-reassign", "no-unanchored"),
+                                                "no-noise-twins", "no-pole-reassign", "no-unanchored", "cluster-mean"),
                    default="median",
                    help="ClusteringSettings.representative of every analysis (default median, with the "
                         "default shape_representative='lowest'); shape-lowest / shape-median: the median "
                         "representative with that shape_representative (shape-median: the default before "
                         "2026-11-27); no-order-check, no-noise-twins, no-pole-reassign: the default with "
                         "order_discrepancy, drop_noise_twins or reassign_borrowed_poles False; no-unanchored: "
-                        "the default with unanchored_noise_coupling None")
+                        "the default with unanchored_noise_coupling None; cluster-mean: the default with cluster_std='mean' "
+                        "(issue 27 (o))")
     p.add_argument("--pair-within-std", type=float, default=4.0,
                    help="pairing: also pair frequencies within this many combined σ_f (default 4, the package's "
                         "default since 2026-11-28; 0: the relative window alone, the rule before)")
+    p.add_argument("--fixed-orders", action="store_true",
+                   help="issue 27 (o): compare the halves pole against pole at every common order (each pole's own "
+                        "sigma) beside the selected modes' z with the default sigma and the sigma of the mean")
+    p.add_argument("--records", nargs="+", default=list(RECORDS), help="records to run (default: all)")
     args = p.parse_args()
-    main(args.data_dir, args.out, levels=tuple(args.levels), tolerance=args.tolerance,
-         representative=args.representative, pair_within_std=args.pair_within_std)
+    main(args.data_dir, args.out, records=tuple(args.records), levels=tuple(args.levels), tolerance=args.tolerance,
+         representative=args.representative, pair_within_std=args.pair_within_std, fixed_orders=args.fixed_orders)

@@ -325,6 +325,19 @@ def test_split_halves_pool(capsys, tmp_path):
     assert "| **measured, pooled** |" in capsys.readouterr().out
 
 
+@needs_data
+def test_split_halves_pool_fixed_orders(capsys):
+    pairs, orders = _module("split_halves_pool").main(DATA, records=("sensor array",), levels=(1,), fixed_orders=True)
+    assert pairs and all(p["record"] == "sensor array" and p["common_orders"] >= 1 for p in pairs)
+    assert len(orders) == sum(p["common_orders"] for p in pairs)
+    # the selected modes' z are those of split_halves on the same halves (the default pool)
+    rows, _ = _module("split_halves_pool").main(DATA, records=("sensor array",), levels=(1,))
+    assert sorted(p["z_f"] for p in pairs) == pytest.approx(sorted(r["z_f"] for r in rows))
+    assert all(-1 <= p["row_correlation0"] <= 1 and -1 <= p["lag1_xi0"] <= 1 for p in pairs)
+    out = capsys.readouterr().out
+    assert "| sensor array | 1 |" in out and "ρ₁ ξ" in out
+
+
 # every script of studies/high_orders with the arguments of a tiny run, in the order of
 # docs/validation-high-orders.md "Reproducing": the runs write the npz files the reports read
 # (one or two records each, a short reference for hcov.py; the file names are those the reports expect)
