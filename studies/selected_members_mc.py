@@ -17,9 +17,15 @@ C`` at orders 2..C k* (the record identified once at the automatic orders for it
 then again with the orders capped; no change where C k* reaches the automatic maximum): what the
 engineer's call gives when it reads no member far above the true order (issue 27 (n)).
 
+The report also reads every member pole as a fixed-order estimator (z against the records' mean
+at that order, the pole's own σ), binned by its ρ (``Diagram.noise_coupling``), the Monte Carlo
+side of docs/validation.md (o). ``--n-blocks N``, ``--duration S`` and ``--sensor-noise-ar
+PHI,LEVEL`` (AR(1) sensor noise of std LEVEL times each channel's instead of the white 5 %) vary
+the records for it.
+
 Usage:
   python studies/selected_members_mc.py RECORDS [chain|frame] OUT.pkl [--max-order N | --k-star-factor C]
-                                                                          # run (about 1 s a record)
+        [--n-blocks N] [--duration S] [--sensor-noise-ar PHI,LEVEL]       # run (about 1 s a record)
   python studies/selected_members_mc.py --report OUT.pkl [OUT2.pkl ...]  # the tables again
 """
 import pickle
@@ -72,31 +78,47 @@ def _mode_rows(res, truth):
     return rows
 
 
-def identify_capped(y, u, fs, max_order=None, k_star_factor=None):
-    """The engineer's identification (automatic settings, ``frequency_range=(1, 20)``), at orders
-    2..max_order, or 2..k_star_factor k* (k* of the automatic identification), when given."""
-    res = modaluq.identify(y, u, fs=fs, frequency_range=(1, 20))
+def identify_capped(y, u, fs, max_order=None, k_star_factor=None, n_blocks=None):
+    """The engineer's identification (automatic settings, ``frequency_range=(1, 20)``; ``n_blocks``
+    when given), at orders 2..max_order, or 2..k_star_factor k* (k* of the automatic
+    identification), when given."""
+    res = modaluq.identify(y, u, fs=fs, frequency_range=(1, 20), n_blocks=n_blocks)
     cap = max_order if k_star_factor is None else int(k_star_factor * res.significant_singular_values) // 2 * 2
     if cap is None or cap >= max(res.settings["orders"]):
         return res
-    return modaluq.identify(y, u, fs=fs, frequency_range=(1, 20), orders=list(range(2, cap + 1, 2)))
+    return modaluq.identify(y, u, fs=fs, frequency_range=(1, 20), n_blocks=n_blocks, orders=list(range(2, cap + 1, 2)))
 
 
-def run(n_records, structure, out=None, duration=DURATION, max_order=None, k_star_factor=None):
+def with_ar_sensor_noise(sim, seed, phi, level):
+    """``sim``'s noise-free outputs plus AR(1) sensor noise (coefficient ``phi``, std ``level`` times
+    each channel's std), independent per channel: colored noise, whose covariance at lags ≥ 1 is not
+    zero, where the default white sensor noise enters lag 0 only (issue 27 (o))."""
+    from scipy.signal import lfilter
+
+    noise = lfilter([1.0], [1.0, -phi], np.random.default_rng(seed).standard_normal(sim.y.shape), axis=0)
+    return sim.y + level * sim.y.std(0) * noise / noise.std(0)
+
+
+def run(n_records, structure, out=None, duration=DURATION, max_order=None, k_star_factor=None, n_blocks=None,
+        sensor_noise_ar=None):
     """Identify ``n_records`` records of ``structure`` (output-only, then input/output), at capped
-    orders when asked (:func:`identify_capped`); write the data to ``out`` (a pickle) when given;
-    return it."""
+    orders when asked (:func:`identify_capped`), with ``n_blocks`` blocks (None: automatic) and,
+    with ``sensor_noise_ar`` = (phi, level), AR(1) sensor noise instead of the white 5 %
+    (:func:`with_ar_sensor_noise`, seeded 99000 + the record's number); write the data to ``out``
+    (a pickle) when given; return it."""
     keywords, offset = STRUCTURES[structure]
     data = {"structure": structure, "records": {}}
     for with_input in (False, True):
         name = "IO" if with_input else "OO"
         recs = []
         for k in range(n_records):
-            sim = modaluq.simulate(int(duration * FS), seed=offset + k, **keywords)
+            sim = modaluq.simulate(int(duration * FS), seed=offset + k, **keywords,
+                                   **({} if sensor_noise_ar is None else {"noise_std": 0.0}))
+            y = sim.y if sensor_noise_ar is None else with_ar_sensor_noise(sim, 99000 + k, *sensor_noise_ar)
             truth = np.sort(sim.frequency_hz)
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
-                res = identify_capped(sim.y, sim.u if with_input else None, sim.fs, max_order, k_star_factor)
+                res = identify_capped(y, sim.u if with_input else None, sim.fs, max_order, k_star_factor, n_blocks)
             recs.append(_mode_rows(res, truth))
             if (k + 1) % 20 == 0:
                 print(f"{structure} {name}: {k + 1}/{n_records}", flush=True)
@@ -189,6 +211,37 @@ def print_table(structure, name, n_records, table):
         print(f"| {lab} | {fs} | {xs} | {inband}/{2 * len(cells)}, cov ≥ {cov:.2f} |")
 
 
+#: bins of ρ (``Diagram.noise_coupling``) of the fixed-order table, as in studies/split_halves_pool.py --fixed-orders
+RHO_BINS = ((0.0, 1.2), (1.2, 2.0), (2.0, 5.0), (5.0, np.inf))
+
+
+def fixed_order_by_rho(recs, min_records=100):
+    """Issue 27 (o): every member pole of the selected true modes read as a fixed-order estimator. At
+    each order a mode's cluster holds in at least ``min_records`` records, z = (x − mean over those
+    records) / the pole's own σ; returned per bin of the pole's ρ (:data:`RHO_BINS`) as (poles, RMS
+    z f, RMS z ξ, coverage f, coverage ξ)."""
+    z = []
+    for m in range(max(map(len, recs))):
+        per_order = {}
+        for r in recs:
+            if m < len(r) and "members" in r[m] and "rho" in r[m]["members"]:
+                mem = r[m]["members"]
+                for i, o in enumerate(mem["order"]):
+                    per_order.setdefault(int(o), []).append((mem["f"][i], mem["sf"][i], mem["xi"][i], mem["sxi"][i],
+                                                             mem["rho"][i]))
+        for v in per_order.values():
+            if len(v) >= min_records:
+                v = np.array(v)
+                z += zip(v[:, 4], (v[:, 0] - v[:, 0].mean()) / v[:, 1], (v[:, 2] - v[:, 2].mean()) / v[:, 3])
+    z = np.array(z, float).reshape(-1, 3)
+    out = {}
+    for lo, hi in RHO_BINS:
+        b = z[(z[:, 0] >= lo) & (z[:, 0] < hi)]
+        if len(b):
+            out[(lo, hi)] = (len(b), *np.sqrt(np.mean(b[:, 1:] ** 2, 0)), *np.mean(np.abs(b[:, 1:]) <= 1.96, 0))
+    return out
+
+
 def report(paths):
     for path in paths:
         with open(path, "rb") as fh:
@@ -204,6 +257,10 @@ def report(paths):
             fired = np.mean([r[m]["widened"] for r in recs for m in range(len(r)) if "widened" in r[m]])
             print(f"{data['structure']} {name}: σ widened by the order (order_discrepancy) for {100 * fired:.1f} % "
                   "of the selected true modes")
+            bins = fixed_order_by_rho(recs, min_records=min(100, max(2, len(recs) // 2)))
+            print(f"{data['structure']} {name}: member poles as fixed-order estimators by ρ (issue 27 (o)): "
+                  + "; ".join(f"ρ {lo:g}–{hi:g}: {b[0]} poles, RMS z {b[1]:.2f}, {b[2]:.2f}, coverage {b[3]:.3f}, "
+                              f"{b[4]:.3f}" for (lo, hi), b in bins.items()))
 
 
 if __name__ == "__main__":
@@ -211,9 +268,12 @@ if __name__ == "__main__":
         report(sys.argv[2:])
     else:
         cap = dict(zip(sys.argv[4::2], sys.argv[5::2]))
-        unknown = set(cap) - {"--max-order", "--k-star-factor"}
+        unknown = set(cap) - {"--max-order", "--k-star-factor", "--n-blocks", "--duration", "--sensor-noise-ar"}
         if unknown:
             sys.exit(f"unknown options {sorted(unknown)}; see the usage in the docstring")
         run(int(sys.argv[1]), sys.argv[2], sys.argv[3],
             max_order=int(cap["--max-order"]) if "--max-order" in cap else None,
-            k_star_factor=float(cap["--k-star-factor"]) if "--k-star-factor" in cap else None)
+            k_star_factor=float(cap["--k-star-factor"]) if "--k-star-factor" in cap else None,
+            n_blocks=int(cap["--n-blocks"]) if "--n-blocks" in cap else None,
+            duration=float(cap.get("--duration", DURATION)),
+            sensor_noise_ar=tuple(map(float, cap["--sensor-noise-ar"].split(","))) if "--sensor-noise-ar" in cap else None)

@@ -242,8 +242,14 @@ def _rms(values):
     return np.sqrt(np.mean(v ** 2)) if v.size else np.nan
 
 
+#: bins of the larger ρ (``Diagram.noise_coupling``) of the two poles compared, the bins of
+#: studies/selected_members_mc.py's fixed-order table (the Monte Carlo side of (o))
+RHO_BINS = ((0.0, 1.2), (1.2, 2.0), (2.0, 5.0), (5.0, np.inf))
+
+
 def print_fixed_orders(pairs, orders):
-    """The table of issue 27 (o): RMS z of the same pairs read three ways."""
+    """The tables of issue 27 (o): RMS z of the same pairs read three ways, the fixed-order z by ρ and by
+    number of windows."""
     print("| record | pairs | orders compared | fixed order: RMS z f, ξ (per pair over its common orders) | "
           "fixed order, above k*: RMS z f, ξ | selected, default σ: RMS z f, ξ | selected, σ of the mean: "
           "RMS z f, ξ | members' ξ-row correlation (median) |")
@@ -257,6 +263,17 @@ def print_fixed_orders(pairs, orders):
               f"{_rms([r['z_f'] for r in o]):.2f}, {_rms([r['z_xi'] for r in o]):.2f} | "
               f"{_rms([p['z_f'] for p in mine]):.2f}, {_rms([p['z_xi'] for p in mine]):.2f} | "
               f"{_rms([p['z_f_mean'] for p in mine]):.2f}, {_rms([p['z_xi_mean'] for p in mine]):.2f} | {corr:.2f} |")
+    print("\nFixed order by ρ, the larger of the two poles' (orders compared, RMS z f, ξ, within ±1.96 f, ξ):\n")
+    print("| record | " + " | ".join(f"ρ {lo:g}–{hi:g}" for lo, hi in RHO_BINS) + " |")
+    print("|---|" + "---|" * len(RHO_BINS))
+    for name in dict.fromkeys(p["record"] for p in pairs):
+        cells = []
+        for lo, hi in RHO_BINS:
+            o = [r for r in orders if r["record"] == name and lo <= r["noise_coupling"] < hi]
+            zf, zx = (np.array([r[k] for r in o], float) for k in ("z_f", "z_xi"))
+            cells.append(f"{len(o)}, {_rms(zf):.2f}, {_rms(zx):.2f}, {100 * np.mean(np.abs(zf) <= Z_95):.0f} %, "
+                         f"{100 * np.mean(np.abs(zx) <= Z_95):.0f} %" if o else "—")
+        print(f"| {name} | " + " | ".join(cells) + " |")
     print("\nBy number of windows (fixed order, every common order; selected, default σ; the lag-1 block "
           "correlation ρ₁ of the representatives' f and ξ rows, mean ± its standard error):\n")
     print("| record | windows | orders compared | fixed order: RMS z f, ξ | pairs | selected: RMS z f, ξ | ρ₁ f | ρ₁ ξ |")

@@ -110,6 +110,18 @@ def test_selected_members_mc(capsys, tmp_path):
     capped = mod.run(2, "frame", duration=60.0, k_star_factor=3.0)
     rows = [r for recs in capped["records"].values() for rec in recs for r in rec if "members" in r]
     assert rows and all(r["members"]["order"].max() <= 3 * r["k_star"] for r in rows)
+    # issue 27 (o): the fixed-order table bins every member pole by its rho, once
+    bins = mod.fixed_order_by_rho(data["records"]["OO"], min_records=2)
+    n_members = sum(len(r["members"]["order"]) for rec in data["records"]["OO"] for r in rec if "members" in r)
+    assert bins and sum(b[0] for b in bins.values()) <= n_members
+    assert all(0 <= b[3] <= 1 and 0 <= b[4] <= 1 and b[1] > 0 for b in bins.values())
+    assert "member poles as fixed-order estimators by ρ" in text
+    # the record variations: 2 blocks fewer than the automatic, AR(1) sensor noise
+    varied = mod.run(1, "frame", duration=60.0, n_blocks=12, sensor_noise_ar=(0.9, 0.1))
+    assert varied["records"]["OO"][0]
+    sim = mod.modaluq.simulate(600, seed=1, noise_std=0.0)
+    noisy = mod.with_ar_sensor_noise(sim, 5, 0.9, 0.1)
+    assert np.allclose(np.std(noisy - sim.y, axis=0), 0.1 * sim.y.std(0))
 
 
 @pytest.mark.slow
@@ -335,7 +347,7 @@ def test_split_halves_pool_fixed_orders(capsys):
     assert sorted(p["z_f"] for p in pairs) == pytest.approx(sorted(r["z_f"] for r in rows))
     assert all(-1 <= p["row_correlation0"] <= 1 and -1 <= p["lag1_xi0"] <= 1 for p in pairs)
     out = capsys.readouterr().out
-    assert "| sensor array | 1 |" in out and "ρ₁ ξ" in out
+    assert "| sensor array | 1 |" in out and "ρ₁ ξ" in out and "| ρ 0–1.2 | ρ 1.2–2 | ρ 2–5 | ρ 5–inf |" in out
 
 
 # every script of studies/high_orders with the arguments of a tiny run, in the order of
