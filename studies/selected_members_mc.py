@@ -21,11 +21,13 @@ The report also reads every member pole as a fixed-order estimator (z against th
 at that order, the pole's own σ), binned by its ρ (``Diagram.noise_coupling``), the Monte Carlo
 side of docs/validation.md (o). ``--n-blocks N``, ``--duration S`` and ``--sensor-noise-ar
 PHI,LEVEL`` (AR(1) sensor noise of std LEVEL times each channel's instead of the white 5 %) vary
-the records for it.
+the records for it, and ``--excitation-ar PHI`` drives the chain with AR(1) forces instead of white
+ones.
 
 Usage:
   python studies/selected_members_mc.py RECORDS [chain|frame] OUT.pkl [--max-order N | --k-star-factor C]
-        [--n-blocks N] [--duration S] [--sensor-noise-ar PHI,LEVEL]       # run (about 1 s a record)
+        [--n-blocks N] [--duration S] [--sensor-noise-ar PHI,LEVEL | --excitation-ar PHI]
+                                                                          # run (about 1 s a record)
   python studies/selected_members_mc.py --report OUT.pkl [OUT2.pkl ...]  # the tables again
 """
 import pickle
@@ -99,26 +101,55 @@ def with_ar_sensor_noise(sim, seed, phi, level):
     return sim.y + level * sim.y.std(0) * noise / noise.std(0)
 
 
+def colored_chain(n_samples, seed, phi, discard=3000, noise_std=0.05):
+    """The paper's chain (``modaluq.simulate``'s defaults: a known force at DOF 0, unknown forces of
+    10 % at every DOF, 5 % white sensor noise) with every force passed through AR(1) (coefficient
+    ``phi``): a colored excitation where ``simulate``'s is white (issue 27 (o)). Returns (y, u, the
+    true frequencies in Hz); u is the known force as applied (colored)."""
+    from scipy.signal import lfilter
+
+    from modaluq.simulate import _chain, default_output_dofs
+
+    m, k, c = _chain.chain_system(6)
+    dofs = default_output_dofs(6)
+    rng = np.random.default_rng(seed)  # drawn in simulate's order: phi = 0 gives simulate's record
+    known = rng.standard_normal(n_samples + discard)
+    force = rng.standard_normal((n_samples + discard, 6)) * 0.1
+    force[:, 0] += known
+    force, known = lfilter([1.0], [1.0, -phi], force, axis=0), lfilter([1.0], [1.0, -phi], known)
+    y = np.empty((n_samples + discard, len(dofs)))
+    _chain.ModalPlan(m, k, c, FS, dofs).run(iter([np.ascontiguousarray(force.T)]), y)
+    y = y[discard:]
+    y = y + noise_std * y.std(0) * rng.standard_normal(y.shape)  # simulate's order of operations
+    return y, known[discard:, None], np.sort(_chain.modal_parameters(m, k, c, output_dofs=dofs)[0])
+
+
 def run(n_records, structure, out=None, duration=DURATION, max_order=None, k_star_factor=None, n_blocks=None,
-        sensor_noise_ar=None):
+        sensor_noise_ar=None, excitation_ar=None):
     """Identify ``n_records`` records of ``structure`` (output-only, then input/output), at capped
     orders when asked (:func:`identify_capped`), with ``n_blocks`` blocks (None: automatic) and,
     with ``sensor_noise_ar`` = (phi, level), AR(1) sensor noise instead of the white 5 %
-    (:func:`with_ar_sensor_noise`, seeded 99000 + the record's number); write the data to ``out``
-    (a pickle) when given; return it."""
+    (:func:`with_ar_sensor_noise`, seeded 99000 + the record's number), and with ``excitation_ar``
+    = phi the chain driven by AR(1) forces (:func:`colored_chain`); write the data to ``out`` (a
+    pickle) when given; return it."""
+    if excitation_ar is not None and (structure != "chain" or sensor_noise_ar is not None):
+        raise ValueError("excitation_ar: the chain only, with its white sensor noise")
     keywords, offset = STRUCTURES[structure]
     data = {"structure": structure, "records": {}}
     for with_input in (False, True):
         name = "IO" if with_input else "OO"
         recs = []
         for k in range(n_records):
-            sim = modaluq.simulate(int(duration * FS), seed=offset + k, **keywords,
-                                   **({} if sensor_noise_ar is None else {"noise_std": 0.0}))
-            y = sim.y if sensor_noise_ar is None else with_ar_sensor_noise(sim, 99000 + k, *sensor_noise_ar)
-            truth = np.sort(sim.frequency_hz)
+            if excitation_ar is None:
+                sim = modaluq.simulate(int(duration * FS), seed=offset + k, **keywords,
+                                       **({} if sensor_noise_ar is None else {"noise_std": 0.0}))
+                y = sim.y if sensor_noise_ar is None else with_ar_sensor_noise(sim, 99000 + k, *sensor_noise_ar)
+                u, truth = sim.u, np.sort(sim.frequency_hz)
+            else:
+                y, u, truth = colored_chain(int(duration * FS), offset + k, excitation_ar)
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
-                res = identify_capped(y, sim.u if with_input else None, sim.fs, max_order, k_star_factor, n_blocks)
+                res = identify_capped(y, u if with_input else None, FS, max_order, k_star_factor, n_blocks)
             recs.append(_mode_rows(res, truth))
             if (k + 1) % 20 == 0:
                 print(f"{structure} {name}: {k + 1}/{n_records}", flush=True)
@@ -268,7 +299,8 @@ if __name__ == "__main__":
         report(sys.argv[2:])
     else:
         cap = dict(zip(sys.argv[4::2], sys.argv[5::2]))
-        unknown = set(cap) - {"--max-order", "--k-star-factor", "--n-blocks", "--duration", "--sensor-noise-ar"}
+        unknown = set(cap) - {"--max-order", "--k-star-factor", "--n-blocks", "--duration", "--sensor-noise-ar",
+                              "--excitation-ar"}
         if unknown:
             sys.exit(f"unknown options {sorted(unknown)}; see the usage in the docstring")
         run(int(sys.argv[1]), sys.argv[2], sys.argv[3],
@@ -276,4 +308,5 @@ if __name__ == "__main__":
             k_star_factor=float(cap["--k-star-factor"]) if "--k-star-factor" in cap else None,
             n_blocks=int(cap["--n-blocks"]) if "--n-blocks" in cap else None,
             duration=float(cap.get("--duration", DURATION)),
-            sensor_noise_ar=tuple(map(float, cap["--sensor-noise-ar"].split(","))) if "--sensor-noise-ar" in cap else None)
+            sensor_noise_ar=tuple(map(float, cap["--sensor-noise-ar"].split(","))) if "--sensor-noise-ar" in cap else None,
+            excitation_ar=float(cap["--excitation-ar"]) if "--excitation-ar" in cap else None)

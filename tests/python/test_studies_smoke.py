@@ -122,6 +122,14 @@ def test_selected_members_mc(capsys, tmp_path):
     sim = mod.modaluq.simulate(600, seed=1, noise_std=0.0)
     noisy = mod.with_ar_sensor_noise(sim, 5, 0.9, 0.1)
     assert np.allclose(np.std(noisy - sim.y, axis=0), 0.1 * sim.y.std(0))
+    # the colored excitation: at phi = 0 it is simulate's record, sample for sample
+    y, u, truth = mod.colored_chain(600, 3, 0.0)
+    sim = mod.modaluq.simulate(600, seed=3)
+    assert np.allclose(y, sim.y, rtol=0, atol=1e-12 * np.abs(sim.y).max()) and np.array_equal(u, sim.u)
+    assert np.allclose(truth, np.sort(sim.frequency_hz))
+    assert mod.run(1, "chain", duration=60.0, excitation_ar=0.7)["records"]["IO"][0]
+    with pytest.raises(ValueError, match="excitation_ar"):
+        mod.run(1, "frame", duration=60.0, excitation_ar=0.7)
 
 
 @pytest.mark.slow
