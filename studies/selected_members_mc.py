@@ -246,13 +246,32 @@ def print_table(structure, name, n_records, table):
 RHO_BINS = ((0.0, 1.2), (1.2, 2.0), (2.0, 5.0), (5.0, np.inf))
 
 
-def fixed_order_by_rho(recs, min_records=100):
+def _paired_orders(recs):
+    """(ρ, z_f, z_ξ) as the split halves read them: records paired (0, 1), (2, 3), ..., at every order
+    both records' clusters of a true mode hold, z = (x_a − x_b) / √(σ_a² + σ_b²), ρ the larger."""
+    z = []
+    for a, b in zip(recs[0::2], recs[1::2]):
+        for ra, rb in zip(a, b):
+            if "members" not in ra or "members" not in rb or "rho" not in ra["members"]:
+                continue
+            ma, mb = ra["members"], rb["members"]
+            at = {int(o): i for i, o in enumerate(mb["order"])}
+            for i, o in enumerate(ma["order"]):
+                if int(o) in at:
+                    j = at[int(o)]
+                    z.append((max(ma["rho"][i], mb["rho"][j]), (ma["f"][i] - mb["f"][j]) / np.hypot(ma["sf"][i], mb["sf"][j]),
+                              (ma["xi"][i] - mb["xi"][j]) / np.hypot(ma["sxi"][i], mb["sxi"][j])))
+    return z
+
+
+def fixed_order_by_rho(recs, min_records=100, paired=False):
     """Issue 27 (o): every member pole of the selected true modes read as a fixed-order estimator. At
     each order a mode's cluster holds in at least ``min_records`` records, z = (x − mean over those
-    records) / the pole's own σ; returned per bin of the pole's ρ (:data:`RHO_BINS`) as (poles, RMS
-    z f, RMS z ξ, coverage f, coverage ξ)."""
-    z = []
-    for m in range(max(map(len, recs))):
+    records) / the pole's own σ; or, with ``paired``, as the split halves read them
+    (:func:`_paired_orders`). Returned per bin of ρ (:data:`RHO_BINS`) as (poles, RMS z f, RMS z ξ,
+    coverage f, coverage ξ)."""
+    z = _paired_orders(recs) if paired else []
+    for m in range(0 if paired else max(map(len, recs))):
         per_order = {}
         for r in recs:
             if m < len(r) and "members" in r[m] and "rho" in r[m]["members"]:
@@ -288,10 +307,12 @@ def report(paths):
             fired = np.mean([r[m]["widened"] for r in recs for m in range(len(r)) if "widened" in r[m]])
             print(f"{data['structure']} {name}: σ widened by the order (order_discrepancy) for {100 * fired:.1f} % "
                   "of the selected true modes")
-            bins = fixed_order_by_rho(recs, min_records=min(100, max(2, len(recs) // 2)))
-            print(f"{data['structure']} {name}: member poles as fixed-order estimators by ρ (issue 27 (o)): "
-                  + "; ".join(f"ρ {lo:g}–{hi:g}: {b[0]} poles, RMS z {b[1]:.2f}, {b[2]:.2f}, coverage {b[3]:.3f}, "
-                              f"{b[4]:.3f}" for (lo, hi), b in bins.items()))
+            for paired, label in ((False, "member poles as fixed-order estimators by ρ"),
+                                  (True, "the same read as the split halves read them (records paired, orders both hold)")):
+                bins = fixed_order_by_rho(recs, min_records=min(100, max(2, len(recs) // 2)), paired=paired)
+                print(f"{data['structure']} {name}: {label} (issue 27 (o)): "
+                      + "; ".join(f"ρ {lo:g}–{hi:g}: {b[0]} poles, RMS z {b[1]:.2f}, {b[2]:.2f}, coverage {b[3]:.3f}, "
+                                  f"{b[4]:.3f}" for (lo, hi), b in bins.items()))
 
 
 if __name__ == "__main__":

@@ -116,6 +116,9 @@ def test_selected_members_mc(capsys, tmp_path):
     assert bins and sum(b[0] for b in bins.values()) <= n_members
     assert all(0 <= b[3] <= 1 and 0 <= b[4] <= 1 and b[1] > 0 for b in bins.values())
     assert "member poles as fixed-order estimators by ρ" in text
+    paired = mod.fixed_order_by_rho(data["records"]["OO"], paired=True)  # records 0 and 1 paired, 2 alone
+    assert paired and "the same read as the split halves read them" in text
+    assert sum(b[0] for b in paired.values()) == len(mod._paired_orders(data["records"]["OO"]))
     # the record variations: 2 blocks fewer than the automatic, AR(1) sensor noise
     varied = mod.run(1, "frame", duration=60.0, n_blocks=12, sensor_noise_ar=(0.9, 0.1))
     assert varied["records"]["OO"][0]
