@@ -44,7 +44,8 @@ z_MAC as the tolerance truncates z_f.
 model order both halves' clusters hold is compared pole against pole with each pole's own σ (the
 per-order σ, a fixed-order estimator), beside the selected modes' z with the default σ (the median of
 the members' σ), with the σ of the members' mean (``cluster_std="mean"``, (12.14) of uq-math.md) and
-the members' median correlation of their ξ factor rows (1: the orders move together).
+the mean correlation between the members' ξ factor rows, its median over the modes (1: the orders
+move together).
 
 Usage: OPENBLAS_NUM_THREADS=1 python studies/split_halves_pool.py [DATA_DIR] [--out pairs.csv]
 (default ../shared/data; about 1 min on one core). docs/validation.md quotes its table.
