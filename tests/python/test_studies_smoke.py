@@ -133,6 +133,9 @@ def test_selected_members_mc(capsys, tmp_path):
     assert mod.run(1, "chain", duration=60.0, excitation_ar=0.7)["records"]["IO"][0]
     with pytest.raises(ValueError, match="excitation_ar"):
         mod.run(1, "frame", duration=60.0, excitation_ar=0.7)
+    # modes outside the band: the 10-DOF chain's five modes in 1-10 Hz are its true modes
+    c10 = mod.run(1, "chain10", duration=60.0)
+    assert len(c10["truth"]) == 5 and c10["truth"].max() < 10 and len(c10["records"]["OO"][0]) == 5
 
 
 @pytest.mark.slow
