@@ -64,6 +64,7 @@ from modaluq.comparison import compare_modes
 from modaluq.harmonics import possible_harmonics
 from modaluq.io import load
 from modaluq.validation import split_halves_windows
+from modaluq.validation.split_halves import _run_halves  # the halves as split_halves runs them
 
 Z_95 = 1.959963984540054
 LEVELS = (1, 2, 4, 8)
@@ -157,16 +158,6 @@ def pairs_of_record(name, data, levels=LEVELS, tolerance=0.02, representative="m
     return rows, failed
 
 
-def _halves(a, t0, t1):
-    """The two halves of [t0, t1) of ``a`` run as ``split_halves`` runs them (the second exactly as
-    the first was identified)."""
-    runs = []
-    for start, stop in ((t0, 0.5 * (t0 + t1)), (0.5 * (t0 + t1), t1)):
-        half = a.with_settings(start=start, stop=stop)
-        runs.append((half.identified_like(runs[0]) if runs else half).run(check_harmonics=False, issue_warnings=False))
-    return runs
-
-
 def _row_correlation(factor):
     """Mean correlation between distinct rows of ``factor`` (members × blocks): 1 when the members'
     first-order moves are one."""
@@ -199,7 +190,7 @@ def fixed_order_pairs(name, data, levels=LEVELS):
     for n in levels:
         for k in range(n):
             try:
-                runs = _halves(a, k * length / n, (k + 1) * length / n)
+                runs, _ = _run_halves(a.with_settings(start=k * length / n, stop=(k + 1) * length / n))
             except ValueError:  # a window too short for the automatic settings: no pair, as in the pool
                 continue
             c = compare_modes(runs[0].selected, runs[1].selected)

@@ -193,6 +193,31 @@ def _window(analysis: Analysis) -> tuple:
     return t0, t1
 
 
+def _run_halves(analysis: Analysis) -> tuple:
+    """The two halves of ``analysis``'s record (within its ``start``/``stop`` window) run as
+    :func:`split_halves` runs them: the first at ``analysis``'s settings, the second exactly as the
+    first was identified. Returns the two run :class:`~modaluq.analysis.Analysis` (their diagrams
+    and selections, for a closer look than the pairs) and the halves' (start, stop) in seconds.
+
+    Raises
+    ------
+    ValueError
+        A half too short for the settings (the error names the half).
+    """
+    t0, t1 = _window(analysis)
+    mid = 0.5 * (t0 + t1)
+    runs = []
+    for k, (a, b) in enumerate(((t0, mid), (mid, t1))):
+        half = analysis.with_settings(start=a, stop=b)
+        if runs:  # the second half exactly as the first was identified
+            half = half.identified_like(runs[0])
+        try:
+            runs.append(half.run(check_harmonics=False, issue_warnings=False))
+        except ValueError as exc:
+            raise ValueError(f"half {k + 1} ({a:g}-{b:g} s): {exc}") from None
+    return runs, ((t0, mid), (mid, t1))
+
+
 def split_halves(analysis: Analysis, *, max_frequency_difference: float = 0.02, min_mac: float = 0.8,
                  pair_within_std: float = 4.0) -> SplitHalves:
     """Identify the two halves of ``analysis``'s record (within its ``start``/``stop`` window) with
@@ -215,20 +240,10 @@ def split_halves(analysis: Analysis, *, max_frequency_difference: float = 0.02, 
     if not isinstance(analysis, Analysis):
         raise TypeError(f"analysis must be a modaluq.analysis.Analysis; got {type(analysis).__name__}")
     pairing = check_pairing(max_frequency_difference, min_mac, pair_within_std)  # before the halves run
-    t0, t1 = _window(analysis)
-    mid = 0.5 * (t0 + t1)
-    runs = []
-    for k, (a, b) in enumerate(((t0, mid), (mid, t1))):
-        half = analysis.with_settings(start=a, stop=b)
-        if runs:  # the second half exactly as the first was identified
-            half = half.identified_like(runs[0])
-        try:
-            runs.append(half.run(check_harmonics=False, issue_warnings=False))
-        except ValueError as exc:
-            raise ValueError(f"half {k + 1} ({a:g}-{b:g} s): {exc}") from None
+    runs, halves_s = _run_halves(analysis)
     c = compare_modes(runs[0].selected, runs[1].selected, **pairing)
     used = runs[0].result.settings
     return SplitHalves(**{f.name: getattr(c, f.name) for f in fields(ModeComparison)},
-                       halves_s=((t0, mid), (mid, t1)),
+                       halves_s=halves_s,
                        settings={k: used[k] for k in ("block_rows", "past_block_rows", "n_blocks")} | {
                            "orders": f"{min(used['orders'])}-{max(used['orders'])}"})
