@@ -45,9 +45,13 @@ DURATION = 400.0
 #: structure: (modaluq.simulate keywords, seed offset)
 STRUCTURES = {"chain": ({}, 7000), "frame": (dict(n_dof=4, input_dofs=(0, 3)), 8000),
               # issue 27 (o): a record with modes outside the band (1.2-9.4 Hz in it, 14-17 Hz above)
-              "chain10": (dict(n_dof=10), 9000)}
+              "chain10": (dict(n_dof=10), 9000),
+              # issue 27 (p): the system of the shared record koma_shearframe_sim.npz (koma_frame), output-only
+              "koma": ({}, 10000)}
 #: the engineer's band per structure (Hz); the true modes are those inside it
-BANDS = {"chain": (1.0, 20.0), "frame": (1.0, 20.0), "chain10": (1.0, 10.0)}
+BANDS = {"chain": (1.0, 20.0), "frame": (1.0, 20.0), "chain10": (1.0, 10.0), "koma": (0.1, 1.5)}
+#: sampling frequency per structure where it is not FS (Hz)
+SAMPLING = {"koma": 12.0}
 VARIANTS = {"default": None, "no order check": ClusteringSettings(order_discrepancy=False),
             "no noise twins": ClusteringSettings(drop_noise_twins=False),
             "no pole reassign": ClusteringSettings(reassign_borrowed_poles=False),
@@ -80,6 +84,7 @@ def _mode_rows(res, truth):
                                       coupled=d.noise_coupled[m], rho=d.noise_coupling[m], rep=int(sel.representative_pole[j]),
                                       rep_index=int(np.flatnonzero(m == sel.representative_pole[j])[0]))
         row["k_star"] = int(d.noise_floor_order)
+        row["n_blocks"] = int(res.settings["n_blocks"])
         row["n_selected"] = {v: sel.n_modes for v, sel in sels.items()}
         rows.append(row)
     return rows
@@ -129,6 +134,31 @@ def colored_chain(n_samples, seed, phi, discard=3000, noise_std=0.05):
     return y, known[discard:, None], np.sort(_chain.modal_parameters(m, k, c, output_dofs=dofs)[0])
 
 
+def koma_frame(n_samples, seed, discard=2000, noise=0.6):
+    """The system of the shared record ``koma_shearframe_sim.npz`` (its data README: koma's notebook
+    "Cov-SSI - Shear frame"): a 5-level shear frame, k = 8000, m = 500, dampers of 50 to ground,
+    white forces of std 1000 at every level, **displacement** outputs (top level first), Gaussian
+    noise of ``noise`` times each channel's std, fs = 12 Hz. Discretized exactly (zero-order hold of
+    the forces) where the notebook integrates with Newmark, so the true modes are the continuous
+    ones. Returns (y, the true frequencies in Hz)."""
+    from scipy.signal import dlsim
+
+    from modaluq.simulate import _chain
+
+    n, fs = 5, SAMPLING["koma"]
+    K = 8000.0 * (2 * np.eye(n) - np.eye(n, k=1) - np.eye(n, k=-1))
+    K[-1, -1] = 8000.0  # the top level has one spring
+    M, C = 500.0 * np.eye(n), 50.0 * np.eye(n)
+    A, B, _, _ = _chain.state_space(M, K, C, fs=fs, output_dofs=range(n))
+    out = np.zeros((n, 2 * n))
+    out[:, n:] = np.eye(n)[::-1]  # state [q'; q]: displacements, the top level first
+    rng = np.random.default_rng(seed)
+    force = 1000.0 * rng.standard_normal((n_samples + discard, n))
+    y = dlsim((A, B, out, np.zeros((n, n)), 1 / fs), force)[1][discard:]
+    y = y + noise * y.std(0) * rng.standard_normal(y.shape)
+    return y, np.sort(_chain.modal_parameters(M, K, C, output_dofs=range(n))[0])
+
+
 def run(n_records, structure, out=None, duration=DURATION, max_order=None, k_star_factor=None, n_blocks=None,
         sensor_noise_ar=None, excitation_ar=None):
     """Identify ``n_records`` records of ``structure`` (output-only, then input/output), at capped
@@ -139,13 +169,18 @@ def run(n_records, structure, out=None, duration=DURATION, max_order=None, k_sta
     pickle) when given; return it."""
     if excitation_ar is not None and (structure != "chain" or sensor_noise_ar is not None):
         raise ValueError("excitation_ar: the chain only, with its white sensor noise")
+    if structure == "koma" and (excitation_ar is not None or sensor_noise_ar is not None):
+        raise ValueError("koma: its own white forces and sensor noise only")
     keywords, offset = STRUCTURES[structure]
+    fs = SAMPLING.get(structure, FS)
     data = {"structure": structure, "records": {}}
-    for with_input in (False, True):
+    for with_input in (False,) if structure == "koma" else (False, True):
         name = "IO" if with_input else "OO"
         recs = []
         for k in range(n_records):
-            if excitation_ar is None:
+            if structure == "koma":
+                (y, truth), u = koma_frame(int(duration * fs), offset + k), None
+            elif excitation_ar is None:
                 sim = modaluq.simulate(int(duration * FS), seed=offset + k, **keywords,
                                        **({} if sensor_noise_ar is None else {"noise_std": 0.0}))
                 y = sim.y if sensor_noise_ar is None else with_ar_sensor_noise(sim, 99000 + k, *sensor_noise_ar)
@@ -155,7 +190,7 @@ def run(n_records, structure, out=None, duration=DURATION, max_order=None, k_sta
                 y, u, truth = colored_chain(int(duration * FS), offset + k, excitation_ar)
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
-                res = identify_capped(y, u if with_input else None, FS, max_order, k_star_factor, n_blocks,
+                res = identify_capped(y, u if with_input else None, fs, max_order, k_star_factor, n_blocks,
                                       BANDS[structure])
             recs.append(_mode_rows(res, truth))
             if (k + 1) % 20 == 0:
@@ -199,8 +234,21 @@ def unanchored_candidate(row, limit=UNANCHORED_RHO):
     return max(sf, np.median(rho * mem["sf"][reliable])), max(sxi, np.median(rho * mem["sxi"][reliable]))
 
 
+def t_candidate(row):
+    """Issue 27 (p): the default's σ times t_{0.975, n_b − 1} / 1.96, n_b the record's blocks: the
+    interval a σ estimated from n_b blocks needs where the estimate is a block mean (Student); None
+    in pickles made before the blocks were kept."""
+    from scipy.stats import t
+
+    if "n_blocks" not in row:
+        return None
+    k = t.ppf(0.975, row["n_blocks"] - 1) / 1.959963984540054
+    return k * row["default"][1], k * row["default"][3]
+
+
 #: the candidates computed after the run from the default's cluster: label -> function of a row
-CANDIDATES = {"√(σ² + spread²)": spread_candidate, f"unanchored (ρ > {UNANCHORED_RHO:g}): ρ σ": unanchored_candidate}
+CANDIDATES = {"√(σ² + spread²)": spread_candidate, f"unanchored (ρ > {UNANCHORED_RHO:g}): ρ σ": unanchored_candidate,
+              "t of n_blocks − 1": t_candidate}
 
 
 def _cells(values, sigmas):

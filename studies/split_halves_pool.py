@@ -47,7 +47,14 @@ the members' σ), with the σ of the members' mean (``cluster_std="mean"``, (12.
 the mean correlation between the members' ξ factor rows, its median over the modes (1: the orders
 move together).
 
-Usage: OPENBLAS_NUM_THREADS=1 python studies/split_halves_pool.py [DATA_DIR] [--out pairs.csv]
+Beside the usual z, every table gives each half read with its own σ (issue 27 (p)): z = (x₁ − x₂) /
+(√2 σ_h) for h = 1, 2, both counted. The combined z divides by both halves' σ together and so
+averages out how much one record's σ scatters; the own-σ reading reads the coverage of a single
+record's interval, 1–2 points low in the Monte Carlo (the coverage lies between the two). ``--simulated-koma N`` runs the same windows on N simulated records of the koma
+frame's system (the group "Monte Carlo"), whose per-record coverage
+``studies/selected_members_mc.py N koma OUT.pkl --duration 600`` measures: the check of the check.
+
+Usage: OPENBLAS_NUM_THREADS=1 python studies/split_halves_pool.py [DATA_DIR] [--out pairs.csv] [--simulated-koma N]
 (default ../shared/data; about 1 min on one core). docs/validation.md quotes its table.
 """
 import argparse
@@ -60,7 +67,7 @@ import numpy as np
 
 import modaluq
 from modaluq.analysis import Analysis
-from modaluq.comparison import compare_modes
+from modaluq.comparison import compare_modes, rms_and_within
 from modaluq.harmonics import possible_harmonics
 from modaluq.io import load
 from modaluq.validation import split_halves_windows
@@ -101,7 +108,25 @@ RECORDS = {
 
 COLUMNS = ("group", "record", "n_windows", "window", "t0_s", "t1_s", "half_s", "block_rows", "n_blocks", "orders",
            "f1_hz", "f2_hz", "sigma_f1_hz", "sigma_f2_hz", "xi1", "xi2", "sigma_xi1", "sigma_xi2",
-           "z_f", "z_xi", "z_f_cap", "by_std", "mac", "z_mac", "mac_p_value", "harmonic", "rms_ratio")
+           "z_f", "z_xi", "z_f_own1", "z_f_own2", "z_xi_own1", "z_xi_own2", "z_f_cap", "by_std", "mac", "z_mac",
+           "mac_p_value", "harmonic", "rms_ratio")
+
+
+def simulated_koma(n_records, seed=20000):
+    """Issue 27 (p): register ``n_records`` records of the koma frame's system (1200 s at 12 Hz, as the
+    shared file; ``selected_members_mc.koma_frame``, seeds ``seed`` + k) as the group "Monte Carlo",
+    so that the split halves are read on records whose per-record coverage the Monte Carlo knows;
+    returns their names."""
+    if str(Path(__file__).resolve().parent) not in sys.path:
+        sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from selected_members_mc import koma_frame  # the studies' own generator of the koma system
+
+    names = []
+    for k in range(n_records):
+        name = f"koma system, simulated record {k}"
+        RECORDS[name] = ("Monte Carlo", lambda data, k=k: (koma_frame(14400, seed + k)[0], 12.0), (0.1, 1.5))
+        names.append(name)
+    return names
 
 
 def _clustering(representative):
@@ -151,6 +176,8 @@ def pairs_of_record(name, data, levels=LEVELS, tolerance=0.02, representative="m
                 orders=check.settings["orders"], f1_hz=f[m, 0], f2_hz=f[m, 1],
                 sigma_f1_hz=sf[m, 0], sigma_f2_hz=sf[m, 1], xi1=x[m, 0], xi2=x[m, 1],
                 sigma_xi1=sx[m, 0], sigma_xi2=sx[m, 1], z_f=check.z_frequency[m], z_xi=check.z_damping[m],
+                z_f_own1=check.z_frequency_own_sigma[m, 0], z_f_own2=check.z_frequency_own_sigma[m, 1],
+                z_xi_own1=check.z_damping_own_sigma[m, 0], z_xi_own2=check.z_damping_own_sigma[m, 1],
                 z_f_cap=tolerance * f[m].max() / np.hypot(*sf[m]), by_std=bool(check.by_std[m]), mac=check.mac[m],
                 z_mac=check.z_mac[m],
                 mac_p_value=check.mac_p_value[m],
@@ -216,11 +243,15 @@ def fixed_order_pairs(name, data, levels=LEVELS):
                 z = []
                 for o in sorted(set(clusters[0]) & set(clusters[1])):
                     (d0, i0), (d1, i1) = (runs[0].diagram, clusters[0][o]), (runs[1].diagram, clusters[1][o])
-                    z.append((o, (d0.frequency_hz[i0] - d1.frequency_hz[i1]) / np.hypot(d0.frequency_std[i0], d1.frequency_std[i1]),
-                              (d0.damping_ratio[i0] - d1.damping_ratio[i1]) / np.hypot(d0.damping_std[i0], d1.damping_std[i1]),
+                    df, dx = d0.frequency_hz[i0] - d1.frequency_hz[i1], d0.damping_ratio[i0] - d1.damping_ratio[i1]
+                    z.append((o, df / np.hypot(d0.frequency_std[i0], d1.frequency_std[i1]),
+                              dx / np.hypot(d0.damping_std[i0], d1.damping_std[i1]),
                               max(d0.noise_coupling[i0], d1.noise_coupling[i1])))
                     orders.append(dict(record=name, n_windows=n, order=o, above_noise_floor=o > k_star,
-                                       z_f=z[-1][1], z_xi=z[-1][2], noise_coupling=z[-1][3]))
+                                       z_f=z[-1][1], z_xi=z[-1][2], noise_coupling=z[-1][3],
+                                       # issue 27 (p): each half's pole with its own σ and ρ
+                                       own=[(df / np.sqrt(2) / d.frequency_std[i], dx / np.sqrt(2) / d.damping_std[i],
+                                             d.noise_coupling[i]) for d, i in ((d0, i0), (d1, i1))]))
                 z = np.array([t[1:3] for t in z], float).reshape(-1, 2)
                 pair["fixed_z_f"], pair["fixed_z_xi"] = (np.sqrt(np.mean(z ** 2, 0)) if len(z) else (np.nan, np.nan))
                 pair["common_orders"] = len(z)
@@ -266,6 +297,18 @@ def print_fixed_orders(pairs, orders):
             cells.append(f"{len(o)}, {_rms(zf):.2f}, {_rms(zx):.2f}, {100 * np.mean(np.abs(zf) <= Z_95):.0f} %, "
                          f"{100 * np.mean(np.abs(zx) <= Z_95):.0f} %" if o else "—")
         print(f"| {name} | " + " | ".join(cells) + " |")
+    print("\nThe same, each half's pole read with its own σ (z = Δ / (√2 σ of that pole), binned by that pole's ρ; "
+          "both halves' poles counted; issue 27 (p)):\n")
+    print("| record | " + " | ".join(f"ρ {lo:g}–{hi:g}" for lo, hi in RHO_BINS) + " |")
+    print("|---|" + "---|" * len(RHO_BINS))
+    for name in dict.fromkeys(p["record"] for p in pairs):
+        own = np.array([t for r in orders if r["record"] == name for t in r["own"]], float).reshape(-1, 3)
+        cells = []
+        for lo, hi in RHO_BINS:
+            b = own[(own[:, 2] >= lo) & (own[:, 2] < hi)]
+            cells.append(f"{len(b)}, {_rms(b[:, 0]):.2f}, {_rms(b[:, 1]):.2f}, {100 * np.mean(np.abs(b[:, 0]) <= Z_95):.0f} %, "
+                         f"{100 * np.mean(np.abs(b[:, 1]) <= Z_95):.0f} %" if len(b) else "—")
+        print(f"| {name} | " + " | ".join(cells) + " |")
     print("\nBy number of windows (fixed order, every common order; selected, default σ; the lag-1 block "
           "correlation ρ₁ of the representatives' f and ξ rows, mean ± its standard error):\n")
     print("| record | windows | orders compared | fixed order: RMS z f, ξ | pairs | selected: RMS z f, ξ | ρ₁ f | ρ₁ ξ |")
@@ -298,24 +341,31 @@ def stats(rows):
         out[f"rms {key}"] = np.sqrt(np.mean(z ** 2)) if z.size else np.nan
         out[f"within {key}"] = 100 * np.mean(np.abs(z) <= Z_95) if z.size else np.nan
         out[f"max {key}"] = np.max(np.abs(z)) if z.size else np.nan
+        # issue 27 (p): each half read with its own σ, both halves' z counted
+        out[f"rms own {key}"], out[f"within own {key}"] = rms_and_within(
+            np.array([r[f"{key}_own{h}"] for r in rows for h in (1, 2)], float))
     return out
 
 
 def table_line(label, rows):
     s = stats(rows)
     if not s["pairs"]:
-        return f"| {label} | 0 | — | — | — | — |"
+        return f"| {label} | 0 | — | — | — | — | — |"
     return (f"| {label} | {s['pairs']} | {s['rms z_f']:.2f}, {s['rms z_xi']:.2f} | "
             f"{s['within z_f']:.0f} %, {s['within z_xi']:.0f} % | {s['max z_f']:.1f}, {s['max z_xi']:.1f} | "
-            f"{s['rms z_mac']:.2f}, {s['rejected']:.0f} % |")
+            f"{s['rms z_mac']:.2f}, {s['rejected']:.0f} % | {s['rms own z_f']:.2f}, {s['rms own z_xi']:.2f}; "
+            f"{100 * s['within own z_f']:.0f} %, {100 * s['within own z_xi']:.0f} % |")
 
 
 def print_tables(rows, failed, levels=LEVELS):
     print("| rows | pairs | RMS z f, ξ | within ±1.96 f, ξ | largest abs(z) f, ξ | shapes: RMS z_MAC, same mode "
-          "rejected at 5 % |")
-    print("|---|---|---|---|---|---|")
-    for group in ("measured", "simulated", "earthquake"):
-        names = [n for n in RECORDS if RECORDS[n][0] == group and any(r["record"] == n for r in rows)]
+          "rejected at 5 % | each half's own σ: RMS z f, ξ; within ±1.96 f, ξ |")
+    print("|---|---|---|---|---|---|---|")
+    for group in ("measured", "simulated", "earthquake", "Monte Carlo"):
+        if not any(r["group"] == group for r in rows):
+            continue
+        names = [n for n in RECORDS if RECORDS[n][0] == group and any(r["record"] == n for r in rows)
+                 and group != "Monte Carlo"]  # the Monte Carlo's records pooled only
         for name in names:
             mine = [r for r in rows if r["record"] == name]
             print(table_line(f"{name}, all windows", mine))
@@ -340,6 +390,9 @@ def print_tables(rows, failed, levels=LEVELS):
                              mine))
             print(table_line(f"{group}, pooled, without the pairs by σ alone", [r for r in mine if not r["by_std"]]))
             print(table_line(f"{group}, pooled, z_f_cap >= 3", [r for r in mine if r["z_f_cap"] >= 3]))
+            if group == "Monte Carlo":
+                for n in levels:
+                    print(table_line(f"Monte Carlo, {n} window(s) only", [r for r in mine if r["n_windows"] == n]))
     print()
     for name, n, k, msg in failed:
         print(f"failed: {name}, {n} window(s), window {k}: {msg}")
@@ -418,6 +471,10 @@ if __name__ == "__main__":
                    help="issue 27 (o): compare the halves pole against pole at every common order (each pole's own "
                         "sigma) beside the selected modes' z with the default sigma and the sigma of the mean")
     p.add_argument("--records", nargs="+", default=list(RECORDS), help="records to run (default: all)")
+    p.add_argument("--simulated-koma", type=int, default=0, metavar="N",
+                   help="issue 27 (p): run N simulated records of the koma frame's system instead of --records "
+                        "(the group 'Monte Carlo'; studies/selected_members_mc.py koma gives their per-record coverage)")
     args = p.parse_args()
-    main(args.data_dir, args.out, records=tuple(args.records), levels=tuple(args.levels), tolerance=args.tolerance,
+    records = simulated_koma(args.simulated_koma) if args.simulated_koma else args.records
+    main(args.data_dir, args.out, records=tuple(records), levels=tuple(args.levels), tolerance=args.tolerance,
          representative=args.representative, pair_within_std=args.pair_within_std, fixed_orders=args.fixed_orders)

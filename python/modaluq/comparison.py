@@ -90,9 +90,7 @@ class ModeComparison:
         pairs; ``n_pairs_by_std``, the pairs made by the σ window alone."""
         out = {"n_pairs": int(len(self.mac)), "n_pairs_by_std": int(np.sum(self.by_std))}
         for name, z in (("frequency", self.z_frequency), ("damping", self.z_damping)):
-            z = z[np.isfinite(z)]
-            out[f"rms_z_{name}"] = float(np.sqrt(np.mean(z ** 2))) if z.size else float("nan")
-            out[f"within_{name}"] = float(np.mean(np.abs(z) <= Z_95)) if z.size else float("nan")
+            out[f"rms_z_{name}"], out[f"within_{name}"] = rms_and_within(z)
         z = self.z_mac[np.isfinite(self.z_mac)]
         out["rms_z_mac"] = float(np.sqrt(np.mean(z ** 2))) if z.size else float("nan")
         p = self.mac_p_value[np.isfinite(self.mac_p_value)]
@@ -242,6 +240,15 @@ def _selected(name: str, modes) -> SelectedModes:
     if modes.n_modes and not np.any(np.isfinite(modes.frequency_std)):
         raise ValueError(f"{name} has no σ (identified with uncertainty=False): nothing to compare against")
     return modes
+
+
+def rms_and_within(z: np.ndarray) -> tuple:
+    """(RMS of the finite z, their share with |z| ≤ 1.96); NaN, NaN without any."""
+    z = np.ravel(z)
+    z = z[np.isfinite(z)]
+    if not z.size:
+        return float("nan"), float("nan")
+    return float(np.sqrt(np.mean(z ** 2))), float(np.mean(np.abs(z) <= Z_95))
 
 
 def _z(values: np.ndarray, stds: np.ndarray) -> np.ndarray:

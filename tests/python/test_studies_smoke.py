@@ -105,6 +105,7 @@ def test_selected_members_mc(capsys, tmp_path):
     text = capsys.readouterr().out
     assert "| no order check |" in text and "σ widened by the order" in text
     assert "| unanchored (ρ > 2): ρ σ |" in text
+    assert "| t of n_blocks − 1 |" in text and row["n_blocks"] >= 2
     assert "true modes found / modes selected per record" in text and "no pole reassign [" in text
     # capped at 3 k*: no member of any selected mode above it
     capped = mod.run(2, "frame", duration=60.0, k_star_factor=3.0)
@@ -136,6 +137,15 @@ def test_selected_members_mc(capsys, tmp_path):
     # modes outside the band: the 10-DOF chain's five modes in 1-10 Hz are its true modes
     c10 = mod.run(1, "chain10", duration=60.0)
     assert len(c10["truth"]) == 5 and c10["truth"].max() < 10 and len(c10["records"]["OO"][0]) == 5
+    # issue 27 (p): the koma frame's system, output-only; its modes are the data README's reference
+    # (koma's omega_n / 2 pi), its displacements largest at the top level (column 0)
+    koma = mod.run(1, "koma", duration=120.0)
+    assert set(koma["records"]) == {"OO"}
+    assert koma["truth"] == pytest.approx([0.1812, 0.5289, 0.8338, 1.0711, 1.2217], abs=1e-4)
+    y, _ = mod.koma_frame(1440, 1, noise=0.0)
+    assert y.shape == (1440, 5) and np.all(np.diff(y.std(0)) < 0)
+    with pytest.raises(ValueError, match="koma"):
+        mod.run(1, "koma", duration=60.0, sensor_noise_ar=(0.9, 0.1))
 
 
 @pytest.mark.slow
@@ -362,6 +372,19 @@ def test_split_halves_pool_fixed_orders(capsys):
     assert all(-1 <= p["row_correlation0"] <= 1 and -1 <= p["lag1_xi0"] <= 1 for p in pairs)
     out = capsys.readouterr().out
     assert "| sensor array | 1 |" in out and "ρ₁ ξ" in out and "| ρ 0–1.2 | ρ 1.2–2 | ρ 2–5 | ρ 5–inf |" in out
+    assert "each half's pole read with its own σ" in out
+    assert all(len(o["own"]) == 2 for o in orders)
+
+
+def test_split_halves_pool_on_simulated_koma_records(capsys):
+    mod = _module("split_halves_pool")
+    names = mod.simulated_koma(1)
+    rows, failed = mod.main("unused", records=names, levels=(1,))
+    assert rows and not failed and {r["group"] for r in rows} == {"Monte Carlo"}
+    r = rows[0]
+    assert r["z_f_own1"] == pytest.approx((r["f1_hz"] - r["f2_hz"]) / np.sqrt(2) / r["sigma_f1_hz"])
+    out = capsys.readouterr().out
+    assert "| **Monte Carlo, pooled** |" in out and "measured, pooled" not in out and "each half's own σ" in out
 
 
 # every script of studies/high_orders with the arguments of a tiny run, in the order of

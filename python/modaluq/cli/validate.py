@@ -212,7 +212,9 @@ def register(subparsers) -> None:
         "split halves (a measured record)",
         "--split-halves FILE identifies the record's two halves alike and compares each mode's two estimates "
         "against their sigma: z = (x1 - x2) / sqrt(s1^2 + s2^2); if sigma is right, RMS z is about 1 and 95 % "
-        "of the z are within +-1.96. --block-rows, --past-block-rows, --n-blocks, --order (the diagram's orders) "
+        "of the z are within +-1.96. Each half is also read with its own sigma, z = (x1 - x2) / (sqrt(2) s_h): "
+        "the coverage of one record's interval, which the combined z can overstate when sigma scatters from "
+        "record to record. --block-rows, --past-block-rows, --n-blocks, --order (the diagram's orders) "
         "and --tolerance (the relative frequency difference that pairs two modes, default 0.02) apply too.")
     within = inspect.signature(split_halves).parameters["pair_within_std"].default
     g.add_argument("--split-halves", metavar="FILE", default=None, help="the record (any format of modaluq identify)")

@@ -11,6 +11,11 @@ simulation is needed, so it checks σ on the user's own record. A structure that
 the halves (temperature, traffic mass, an operating machine's state, a strong-motion half and a
 coda) gives |z| > 1 that is not σ's fault: choose a stationary record.
 
+Each half is also read with its own σ, z = (x₁ − x₂) / (√2 σ_h) (``z_frequency_own_sigma``,
+``z_damping_own_sigma``): the halves have the same length and settings, so this has the law of
+one record's error over its own σ, the coverage of an engineer's interval x ± 1.96 σ, which the
+combined z overstates where σ scatters from record to record.
+
     >>> import modaluq
     >>> from modaluq.analysis import Analysis
     >>> from modaluq.simulate import simulate
@@ -29,7 +34,7 @@ import numpy as np
 
 from ..analysis import Analysis
 from ..checks import check_boolean, check_integers
-from ..comparison import ModeComparison, check_pairing, compare_modes
+from ..comparison import ModeComparison, check_pairing, compare_modes, rms_and_within
 
 __all__ = ["PooledSplitHalves", "SplitHalves", "split_halves", "split_halves_windows"]
 
@@ -45,14 +50,62 @@ class SplitHalves(ModeComparison):
     halves_s: tuple = ()
     settings: dict = None
 
+    @property
+    def z_frequency_own_sigma(self) -> np.ndarray:
+        """(n_pairs, 2): (f₁ − f₂) / (√2 σ_f,h) with each half h's own σ, the per-record reading."""
+        return _z_own_sigma(self.frequency_hz, self.frequency_std)
+
+    @property
+    def z_damping_own_sigma(self) -> np.ndarray:
+        """(n_pairs, 2): (ξ₁ − ξ₂) / (√2 σ_ξ,h) with each half h's own σ, the per-record reading."""
+        return _z_own_sigma(self.damping_ratio, self.damping_std)
+
+    def summary(self) -> dict:
+        """:meth:`ModeComparison.summary`, and the same of the per-record reading (each half's own σ,
+        both halves' z counted): ``rms_z_frequency_own_sigma``, ``within_frequency_own_sigma``,
+        ``rms_z_damping_own_sigma``, ``within_damping_own_sigma``."""
+        out = super().summary()
+        for name, z in (("frequency", self.z_frequency_own_sigma), ("damping", self.z_damping_own_sigma)):
+            out[f"rms_z_{name}_own_sigma"], out[f"within_{name}_own_sigma"] = rms_and_within(z)
+        return out
+
+    def to_dataframe(self):
+        """:meth:`ModeComparison.to_dataframe` with the per-record reading's z of each half
+        (``z_frequency_own_sigma_1``, ``_2``, ``z_damping_own_sigma_1``, ``_2``)."""
+        df = super().to_dataframe()
+        for name, z in (("frequency", self.z_frequency_own_sigma), ("damping", self.z_damping_own_sigma)):
+            df[f"z_{name}_own_sigma_1"], df[f"z_{name}_own_sigma_2"] = z[:, 0], z[:, 1]
+        return df
+
     def report(self) -> str:
         """A Markdown report: the windows, the settings, the table and the summary."""
         (a0, a1), (b0, b1) = self.halves_s
         body = self._body("half", "both halves", "σ is right",
                           " (a handful of modes only says whether σ is grossly off)")
+        s = self.summary()
+        if s["n_pairs"]:
+            body += ["", f"Each half's own σ (z = Δ / (√2 σ of that half), the per-record reading): RMS z "
+                         f"{s['rms_z_frequency_own_sigma']:.2f} (f), {s['rms_z_damping_own_sigma']:.2f} (ξ); within "
+                         f"±1.96: {100 * s['within_frequency_own_sigma']:.0f} % (f), "
+                         f"{100 * s['within_damping_own_sigma']:.0f} % (ξ). " + OWN_SIGMA_NOTE]
         return "\n".join([f"## Split halves: {a0:g}-{a1:g} s against {b0:g}-{b1:g} s", "",
                           "Settings of both halves: " + ", ".join(f"{k} {v}" for k, v in (self.settings or {}).items()),
                           "", *body]) + "\n"
+
+
+#: Why the report gives the per-record reading beside z = Δ / √(σ₁² + σ₂²) (docs/validation.md issue 27 (p)).
+OWN_SIGMA_NOTE = ("z = Δ / √(σ₁² + σ₂²) divides by both halves' σ together, which averages out how much one "
+                  "record's σ scatters; an engineer's interval f ± 1.96 σ uses one record's σ. Where σ scatters from "
+                  "record to record, the combined z can read calibrated while single intervals cover less; the "
+                  "per-record reading reads their coverage 1-2 points low. The coverage of your intervals lies "
+                  "between the two (docs/validation.md, issue 27 (p)).")
+
+
+def _z_own_sigma(values: np.ndarray, stds: np.ndarray) -> np.ndarray:
+    """(x₁ − x₂) / (√2 σ_h) for h = 1, 2: the halves have the same length and settings, so under "σ
+    is right" Δ has the variance 2σ² and each column is a standard normal read with one record's σ."""
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return (values[:, :1] - values[:, 1:]) / (np.sqrt(2.0) * stds)
 
 
 @dataclass(frozen=True)
@@ -118,17 +171,23 @@ class PooledSplitHalves:
                  "RMS z ≈ 1 and about 95 % within ±1.96, over many pairs; with n pairs an RMS z is known to about "
                  "±1/√(2n). A structure that changes between halves (temperature, an operating machine, people on a "
                  "floor) raises z without σ being wrong.", "",
-                 "| windows | pairs | RMS z f, ξ (± about) | within ±1.96 f, ξ | RMS z_MAC, \"same mode\" rejected |",
-                 "|---|---|---|---|---|"]
+                 "The last two columns read each half with its own σ, z = Δ / (√2 σ of that half), both halves' z "
+                 "counted. " + OWN_SIGMA_NOTE, "",
+                 "| windows | pairs | RMS z f, ξ (± about) | within ±1.96 f, ξ | RMS z_MAC, \"same mode\" rejected "
+                 "| own σ: RMS z f, ξ | own σ: within ±1.96 f, ξ |",
+                 "|---|---|---|---|---|---|---|"]
         for label, n in [*((f"{n}", n) for n in self.levels), ("**all**", None)]:
             s = self.pooled(n).summary()
             if not s["n_pairs"]:
-                lines.append(f"| {label} | 0 | — | — | — |")
+                lines.append(f"| {label} | 0 | — | — | — | — | — |")
                 continue
             lines.append(f"| {label} | {s['n_pairs']} | {s['rms_z_frequency']:.2f}, {s['rms_z_damping']:.2f} "
                          f"(±{1 / np.sqrt(2 * s['n_pairs']):.2f}) | "
                          f"{100 * s['within_frequency']:.0f} %, {100 * s['within_damping']:.0f} % | "
-                         f"{s['rms_z_mac']:.2f}, {100 * s['same_mode_rejected']:.0f} % |")
+                         f"{s['rms_z_mac']:.2f}, {100 * s['same_mode_rejected']:.0f} % | "
+                         f"{s['rms_z_frequency_own_sigma']:.2f}, {s['rms_z_damping_own_sigma']:.2f} | "
+                         f"{100 * s['within_frequency_own_sigma']:.0f} %, "
+                         f"{100 * s['within_damping_own_sigma']:.0f} % |")
         for level in self.levels:  # a few failures each; beyond three, the first and a count
             mine = [f for f in self.failed if f[0] == level]
             for n, k, (a, b), message in mine[:1] if len(mine) > 3 else mine:

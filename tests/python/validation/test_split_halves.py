@@ -52,10 +52,49 @@ def test_the_halves_are_identified_alike_and_z_is_the_difference_over_its_std(re
     assert s["rms_z_mac"] == pytest.approx(np.sqrt(np.mean(check.z_mac ** 2)))
     assert s["same_mode_rejected"] == pytest.approx(np.mean(check.mac_p_value < 0.05))
     table = check.to_dataframe()
-    assert list(table["z_frequency"]) == list(check.z_frequency) and table.shape == (6, 14)
+    assert list(table["z_frequency"]) == list(check.z_frequency) and table.shape == (6, 18)
     assert list(table["paired_by_std"]) == list(check.by_std)
     assert "6 modes in both halves" in check.report() and "RMS z_MAC" in check.report()
     assert f"With 6 pairs, an RMS z is known to about ±{1 / np.sqrt(12):.2f}" in check.report()
+
+
+def test_each_half_read_with_its_own_sigma(record):
+    """Issue 27 (p): z = Δ / (√2 σ_h) per half, its summary, table columns and report lines."""
+    a = Analysis.from_arrays(record.y, fs=record.fs, settings=SETTINGS)
+    check = split_halves(a)
+    f, sf, x, sx = check.frequency_hz, check.frequency_std, check.damping_ratio, check.damping_std
+    for h in (0, 1):
+        assert check.z_frequency_own_sigma[:, h] == pytest.approx((f[:, 0] - f[:, 1]) / (np.sqrt(2) * sf[:, h]), rel=1e-12)
+        assert check.z_damping_own_sigma[:, h] == pytest.approx((x[:, 0] - x[:, 1]) / (np.sqrt(2) * sx[:, h]), rel=1e-12)
+    s = check.summary()
+    both = np.concatenate([check.z_damping_own_sigma[:, 0], check.z_damping_own_sigma[:, 1]])
+    assert s["rms_z_damping_own_sigma"] == pytest.approx(np.sqrt(np.mean(both ** 2)))
+    assert s["within_damping_own_sigma"] == pytest.approx(np.mean(abs(both) <= 1.959963984540054))
+    table = check.to_dataframe()
+    assert list(table["z_frequency_own_sigma_2"]) == list(check.z_frequency_own_sigma[:, 1])
+    assert "Each half's own σ" in check.report()
+    pooled = split_halves_windows(a, (1,))
+    assert "own σ: within ±1.96 f, ξ" in pooled.report()
+    # with equal σ in both halves the two readings are one: √(σ² + σ²) = √2 σ
+    same = SplitHalves(f, np.column_stack([sf[:, 0], sf[:, 0]]), x, np.column_stack([sx[:, 0], sx[:, 0]]), check.mac)
+    assert same.z_frequency_own_sigma[:, 1] == pytest.approx(same.z_frequency, rel=1e-12)
+
+
+def test_own_sigma_reads_the_coverage_of_one_records_interval():
+    """Why the report gives the own-σ reading: with σ that scatters from record to record (here
+    log-normal, independent of the estimates), a single record's interval x ± 1.96 σ covers less
+    than 95 %; the combined z of the halves reads more, each half's own σ reads that coverage
+    (Δ / √2 has the law of one record's error)."""
+    rng = np.random.default_rng(1)
+    n = 200_000
+    x = rng.standard_normal((n, 2))
+    sigma = np.exp(0.5 * rng.standard_normal((n, 2)) - 0.25)
+    one_record = np.mean(abs(x[:, 0]) / sigma[:, 0] <= 1.959963984540054)
+    halves = SplitHalves(x, sigma, x, sigma, np.ones(n))
+    s = halves.summary()
+    assert one_record < 0.85  # the interval's coverage, far below 95 %
+    assert s["within_frequency"] > one_record + 0.03  # the combined reading over-reads it
+    assert s["within_frequency_own_sigma"] == pytest.approx(one_record, abs=0.005)
 
 
 def test_the_second_half_takes_the_first_halfs_automatic_settings(record):
