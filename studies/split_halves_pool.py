@@ -326,20 +326,18 @@ def print_fixed_orders(pairs, orders):
 
 
 def stats(rows):
-    """Pairs, RMS z, share within ±1.96 and the largest |z|, of f and of ξ; RMS z_MAC and the share of
-    pairs whose "same mode" test of the shapes rejects at 5 %."""
+    """Pairs, RMS z, share within ±1.96 (a fraction) and the largest |z|, of f and of ξ, and the same
+    RMS and share of each half read with its own σ; RMS z_MAC and the share of pairs whose "same mode"
+    test of the shapes rejects at 5 % (in %)."""
     out = {"pairs": len(rows)}
-    z = np.array([r["z_mac"] for r in rows], float)
-    z = z[np.isfinite(z)]
-    out["rms z_mac"] = np.sqrt(np.mean(z ** 2)) if z.size else np.nan
+    out["rms z_mac"] = rms_and_within(np.array([r["z_mac"] for r in rows], float))[0]
     p = np.array([r["mac_p_value"] for r in rows], float)
     p = p[np.isfinite(p)]
     out["rejected"] = 100 * np.mean(p < 0.05) if p.size else np.nan
     for key in ("z_f", "z_xi"):
         z = np.array([r[key] for r in rows], float)
+        out[f"rms {key}"], out[f"within {key}"] = rms_and_within(z)
         z = z[np.isfinite(z)]
-        out[f"rms {key}"] = np.sqrt(np.mean(z ** 2)) if z.size else np.nan
-        out[f"within {key}"] = 100 * np.mean(np.abs(z) <= Z_95) if z.size else np.nan
         out[f"max {key}"] = np.max(np.abs(z)) if z.size else np.nan
         # issue 27 (p): each half read with its own σ, both halves' z counted
         out[f"rms own {key}"], out[f"within own {key}"] = rms_and_within(
@@ -352,7 +350,7 @@ def table_line(label, rows):
     if not s["pairs"]:
         return f"| {label} | 0 | — | — | — | — | — |"
     return (f"| {label} | {s['pairs']} | {s['rms z_f']:.2f}, {s['rms z_xi']:.2f} | "
-            f"{s['within z_f']:.0f} %, {s['within z_xi']:.0f} % | {s['max z_f']:.1f}, {s['max z_xi']:.1f} | "
+            f"{100 * s['within z_f']:.0f} %, {100 * s['within z_xi']:.0f} % | {s['max z_f']:.1f}, {s['max z_xi']:.1f} | "
             f"{s['rms z_mac']:.2f}, {s['rejected']:.0f} % | {s['rms own z_f']:.2f}, {s['rms own z_xi']:.2f}; "
             f"{100 * s['within own z_f']:.0f} %, {100 * s['within own z_xi']:.0f} % |")
 

@@ -91,8 +91,7 @@ class ModeComparison:
         out = {"n_pairs": int(len(self.mac)), "n_pairs_by_std": int(np.sum(self.by_std))}
         for name, z in (("frequency", self.z_frequency), ("damping", self.z_damping)):
             out[f"rms_z_{name}"], out[f"within_{name}"] = rms_and_within(z)
-        z = self.z_mac[np.isfinite(self.z_mac)]
-        out["rms_z_mac"] = float(np.sqrt(np.mean(z ** 2))) if z.size else float("nan")
+        out["rms_z_mac"] = rms_and_within(self.z_mac)[0]
         p = self.mac_p_value[np.isfinite(self.mac_p_value)]
         out["same_mode_rejected"] = float(np.mean(p < 0.05)) if p.size else float("nan")
         return out
