@@ -7,6 +7,7 @@ void bind_covariance(pybind11::module_& m);
 void bind_identify(pybind11::module_& m);
 void bind_stabilization(pybind11::module_& m);
 void bind_indicators(pybind11::module_& m);
+void bind_interval(pybind11::module_& m);
 void bind_multisetup(pybind11::module_& m);
 void bind_poser(pybind11::module_& m);
 }  // namespace modaluq::python

@@ -118,6 +118,7 @@ PYBIND11_MODULE(MODALUQ_CORE_MODULE, m) {
     modaluq::python::bind_identify(m);
     modaluq::python::bind_stabilization(m);
     modaluq::python::bind_indicators(m);
+    modaluq::python::bind_interval(m);
     modaluq::python::bind_multisetup(m);
     modaluq::python::bind_poser(m);
 }

@@ -84,7 +84,7 @@ def _mode_rows(res, truth):
                                       coupled=d.noise_coupled[m], rho=d.noise_coupling[m], rep=int(sel.representative_pole[j]),
                                       rep_index=int(np.flatnonzero(m == sel.representative_pole[j])[0]))
         row["k_star"] = int(d.noise_floor_order)
-        row["n_blocks"] = int(res.settings["n_blocks"])
+        row["n_blocks"] = int(res.n_blocks)  # the core's blocks (more than asked where whole blocks are left over)
         row["n_selected"] = {v: sel.n_modes for v, sel in sels.items()}
         rows.append(row)
     return rows
@@ -235,29 +235,30 @@ def unanchored_candidate(row, limit=UNANCHORED_RHO):
 
 
 def t_candidate(row):
-    """Issue 27 (p): the default's σ times t_{0.975, n_b − 1} / 1.96, n_b the record's blocks: the
-    interval a σ estimated from n_b blocks needs where the estimate is a block mean (Student); None
-    in pickles made before the blocks were kept."""
-    from scipy.stats import t
+    """Issue 27 (p), (q): the product's 95 % interval ± t σ (``SelectedModes.intervals``, t the
+    Student-t quantile of the record's n_blocks − 1): the default's σ, read with the factor t
+    instead of 1.96 (a third entry: the factor); None in pickles made before the blocks were kept."""
+    from modaluq.intervals import interval_factor
 
     if "n_blocks" not in row:
         return None
-    k = t.ppf(0.975, row["n_blocks"] - 1) / 1.959963984540054
-    return k * row["default"][1], k * row["default"][3]
+    return row["default"][1], row["default"][3], interval_factor(int(row["n_blocks"]))
 
 
 #: the candidates computed after the run from the default's cluster: label -> function of a row
 CANDIDATES = {"√(σ² + spread²)": spread_candidate, f"unanchored (ρ > {UNANCHORED_RHO:g}): ρ σ": unanchored_candidate,
-              "t of n_blocks − 1": t_candidate}
+              "interval ± t σ (t of n_blocks − 1)": t_candidate}
 
 
-def _cells(values, sigmas):
-    """median σ / std over records, coverage of ±1.96 σ around the mean, RMS z."""
+def _cells(values, sigmas, factors=None):
+    """median σ / std over records, coverage of ± factor σ (1.96, or each record's interval factor)
+    around the mean, RMS z."""
+    factors = np.full(np.shape(values), 1.96) if factors is None else np.asarray(factors, float)
     ok = np.isfinite(values) & np.isfinite(sigmas) & (sigmas > 0)
     v, s = values[ok], sigmas[ok]
     std = np.std(v, ddof=1)
     z = (v - v.mean()) / s
-    return np.median(s) / std, np.mean(np.abs(z) <= 1.96), np.sqrt(np.mean(z ** 2))
+    return np.median(s) / std, np.mean(np.abs(z) <= factors[ok]), np.sqrt(np.mean(z ** 2))
 
 
 def tables(data, variants=None, spread=True) -> dict:
@@ -275,12 +276,14 @@ def tables(data, variants=None, spread=True) -> dict:
                     sig = [CANDIDATES[v](r) for r in rows]
                     if any(x is None for x in sig):
                         continue
-                    a = np.array([(r["default"][0], sf, r["default"][2], sxi) for r, (sf, sxi) in zip(rows, sig)])
+                    a = np.array([(r["default"][0], x[0], r["default"][2], x[1]) for r, x in zip(rows, sig)])
+                    factors = np.array([x[2] if len(x) > 2 else 1.96 for x in sig])
                 else:
                     a = np.array([r[v] for r in rows])
+                    factors = None
                 if len(rows) < 3:
                     continue
-                table.setdefault(v, []).append((_cells(a[:, 0], a[:, 1]), _cells(a[:, 2], a[:, 3])))
+                table.setdefault(v, []).append((_cells(a[:, 0], a[:, 1], factors), _cells(a[:, 2], a[:, 3], factors)))
         out[name] = table
     return out
 

@@ -173,6 +173,7 @@ def pairs_of_record(name, data, levels=LEVELS, tolerance=0.02, representative="m
             rows.append(dict(
                 group=group, record=name, n_windows=n, window=k, t0_s=t0, t1_s=t1, half_s=(t1 - t0) / 2,
                 block_rows=check.settings["block_rows"], n_blocks=check.settings["n_blocks"],
+                interval_factor=float(check.interval_factor_95[m]),  # t of the core's blocks − 1
                 orders=check.settings["orders"], f1_hz=f[m, 0], f2_hz=f[m, 1],
                 sigma_f1_hz=sf[m, 0], sigma_f2_hz=sf[m, 1], xi1=x[m, 0], xi2=x[m, 1],
                 sigma_xi1=sx[m, 0], sigma_xi2=sx[m, 1], z_f=check.z_frequency[m], z_xi=check.z_damping[m],
@@ -340,25 +341,30 @@ def stats(rows):
         z = z[np.isfinite(z)]
         out[f"max {key}"] = np.max(np.abs(z)) if z.size else np.nan
         # issue 27 (p): each half read with its own σ, both halves' z counted
-        out[f"rms own {key}"], out[f"within own {key}"] = rms_and_within(
-            np.array([r[f"{key}_own{h}"] for r in rows for h in (1, 2)], float))
+        own = np.array([r[f"{key}_own{h}"] for r in rows for h in (1, 2)], float)
+        out[f"rms own {key}"], out[f"within own {key}"] = rms_and_within(own)
+        # (q): the product's 95 % interval ± t σ, t of the half's n_blocks − 1 (SelectedModes.intervals)
+        factor = np.array([r["interval_factor"] for r in rows for h in (1, 2)], float)
+        out[f"within own interval {key}"] = rms_and_within(own * 1.96 / factor)[1] if rows else np.nan
     return out
 
 
 def table_line(label, rows):
     s = stats(rows)
     if not s["pairs"]:
-        return f"| {label} | 0 | — | — | — | — | — |"
+        return f"| {label} | 0 | — | — | — | — | — | — |"
     return (f"| {label} | {s['pairs']} | {s['rms z_f']:.2f}, {s['rms z_xi']:.2f} | "
             f"{100 * s['within z_f']:.0f} %, {100 * s['within z_xi']:.0f} % | {s['max z_f']:.1f}, {s['max z_xi']:.1f} | "
             f"{s['rms z_mac']:.2f}, {s['rejected']:.0f} % | {s['rms own z_f']:.2f}, {s['rms own z_xi']:.2f}; "
-            f"{100 * s['within own z_f']:.0f} %, {100 * s['within own z_xi']:.0f} % |")
+            f"{100 * s['within own z_f']:.0f} %, {100 * s['within own z_xi']:.0f} % | "
+            f"{100 * s['within own interval z_f']:.0f} %, {100 * s['within own interval z_xi']:.0f} % |")
 
 
 def print_tables(rows, failed, levels=LEVELS):
     print("| rows | pairs | RMS z f, ξ | within ±1.96 f, ξ | largest abs(z) f, ξ | shapes: RMS z_MAC, same mode "
-          "rejected at 5 % | each half's own σ: RMS z f, ξ; within ±1.96 f, ξ |")
-    print("|---|---|---|---|---|---|---|")
+          "rejected at 5 % | each half's own σ: RMS z f, ξ; within ±1.96 f, ξ | own σ: within the 95 % interval "
+          "± t σ f, ξ |")
+    print("|---|---|---|---|---|---|---|---|")
     for group in ("measured", "simulated", "earthquake", "Monte Carlo"):
         if not any(r["group"] == group for r in rows):
             continue

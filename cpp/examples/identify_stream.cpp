@@ -56,10 +56,16 @@ int main() {
     // each with its standard deviation (median over its cluster) and the spread across orders.
     const modaluq::Diagram diagram = modaluq::stabilization_diagram(id);
     const modaluq::SelectedModes m = modaluq::select_modes(diagram);
-    std::printf("  f [Hz]     std f    xi [%%]   std xi [%%]   poles\n");
+    // A 95 % interval is f +- t std with t the Student-t quantile of n_blocks - 1: each std is
+    // estimated from the blocks and scatters (interval.hpp; 1.96 would cover less).
+    const double t = modaluq::interval_factor(id.n_blocks, 0.95);
+    std::printf("  f [Hz]     std f    95 %% interval of f [Hz]   xi [%%]   std xi [%%]   poles\n");
     for (modaluq::Index i = 0; i < m.n_modes(); ++i)
-        std::printf("%8.4f  %8.4f  %7.3f  %9.3f   %5lld\n", m.frequency_hz(i), m.frequency_std(i),
+        std::printf("%8.4f  %8.4f  [%8.4f, %8.4f]   %7.3f  %9.3f   %5lld\n", m.frequency_hz(i), m.frequency_std(i),
+                    m.frequency_hz(i) - t * m.frequency_std(i), m.frequency_hz(i) + t * m.frequency_std(i),
                     100 * m.damping_ratio(i), 100 * m.damping_std(i), static_cast<long long>(m.n_poles(i)));
+    std::printf("95 %% intervals: value +- %.3f std (Student t, %lld blocks)\n", t,
+                static_cast<long long>(id.n_blocks));
     // Exit status says whether exactly the two modes were selected within 1 % (CI runs this as a check).
     int found = 0;
     for (double f : f_true)

@@ -28,6 +28,7 @@ from .comparison import ModeComparison, compare_modes
 from .geometry import Geometry
 from .horizons import HorizonCheck, check_horizons
 from .identification import identify, identify_setups
+from .intervals import interval_factor
 from .poser import PoserResult, ReferenceMismatchWarning
 from .results import ModalUQWarning, Modes, Result
 from .selection import SelectedModes, select_modes
@@ -62,6 +63,7 @@ __all__ = [
     "compare_modes",
     "identify",
     "identify_setups",
+    "interval_factor",
     "load_tracks",
     "modal_assurance_criterion",
     "monitor",

@@ -8,7 +8,7 @@ import collections.abc
 import numpy
 import numpy.typing
 import typing
-__all__: list[str] = ['ClusterStd', 'ClusteringOptions', 'CovarianceAccumulator', 'CovarianceAccumulatorState', 'Covariances', 'Diagram', 'DropReason', 'HankelLayout', 'Identification', 'IdentificationWarning', 'IdentifyOptions', 'IndicatorStatistics', 'Linkage', 'Modes', 'NumericalError', 'PoleStatus', 'Poles', 'PoserOptions', 'PoserResult', 'PoserSetupModes', 'Representative', 'SelectedModes', 'SetupData', 'SetupsIdentification', 'SlowDecay', 'StabilityCriteria', 'blas_library', 'builds', 'cluster_labels', 'compute_covariances', 'cpu_path', 'eigen_simd', 'eigen_version', 'identify', 'identify_covariances', 'identify_setups', 'mean_phase_deviation', 'modal_assurance', 'modal_assurance_criterion', 'modal_assurance_statistics', 'modal_assurance_statistics_joint', 'modal_phase_collinearity', 'modal_phase_collinearity_statistics', 'poles_of', 'poser_merge', 'select_modes', 'stabilization_diagram', 'uses_blas']
+__all__: list[str] = ['ClusterStd', 'ClusteringOptions', 'CovarianceAccumulator', 'CovarianceAccumulatorState', 'Covariances', 'Diagram', 'DropReason', 'HankelLayout', 'Identification', 'IdentificationWarning', 'IdentifyOptions', 'IndicatorStatistics', 'Linkage', 'Modes', 'NumericalError', 'PoleStatus', 'Poles', 'PoserOptions', 'PoserResult', 'PoserSetupModes', 'Representative', 'SelectedModes', 'SetupData', 'SetupsIdentification', 'SlowDecay', 'StabilityCriteria', 'blas_library', 'builds', 'cluster_labels', 'compute_covariances', 'cpu_path', 'eigen_simd', 'eigen_version', 'identify', 'identify_covariances', 'identify_setups', 'interval_factor', 'mean_phase_deviation', 'modal_assurance', 'modal_assurance_criterion', 'modal_assurance_statistics', 'modal_assurance_statistics_joint', 'modal_phase_collinearity', 'modal_phase_collinearity_statistics', 'poles_of', 'poser_merge', 'select_modes', 'stabilization_diagram', 'student_t_probability', 'student_t_quantile', 'uses_blas']
 class NumericalError(ArithmeticError):
     pass
 class HankelLayout:
@@ -1341,6 +1341,8 @@ def identify_covariances(covariances: Covariances, options: IdentifyOptions) -> 
     ...
 def identify_setups(setups: collections.abc.Sequence[SetupData], options: IdentifyOptions) -> SetupsIdentification:
     ...
+def interval_factor(n_blocks: typing.SupportsInt | typing.SupportsIndex, level: typing.SupportsFloat | typing.SupportsIndex = 0.95) -> float:
+    ...
 def mean_phase_deviation(shape: typing.Annotated[numpy.typing.ArrayLike, numpy.complex128, "[m, 1]"], cov: typing.Annotated[numpy.typing.ArrayLike, numpy.float64, "[m, n]"] = ...) -> IndicatorStatistics:
     ...
 def modal_assurance(a: typing.Annotated[numpy.typing.ArrayLike, numpy.complex128, "[m, 1]"], b: typing.Annotated[numpy.typing.ArrayLike, numpy.complex128, "[m, 1]"]) -> float:
@@ -1362,6 +1364,10 @@ def poser_merge(setups: collections.abc.Sequence[PoserSetupModes], options: Pose
 def select_modes(diagram: Diagram, options: ClusteringOptions) -> SelectedModes:
     ...
 def stabilization_diagram(poles: Poles, criteria: StabilityCriteria) -> Diagram:
+    ...
+def student_t_probability(t: typing.SupportsFloat | typing.SupportsIndex, dof: typing.SupportsInt | typing.SupportsIndex) -> float:
+    ...
+def student_t_quantile(level: typing.SupportsFloat | typing.SupportsIndex, dof: typing.SupportsInt | typing.SupportsIndex) -> float:
     ...
 __version__: str = '0.1.0'
 blas_library: str

@@ -47,6 +47,7 @@ def selected_modes_to_dict(selected) -> dict:
     """:class:`~modaluq.SelectedModes` as plain Python (JSON-ready): one dict per mode, shapes per channel."""
     num = finite_or_none
     noise_coupled = selected.noise_coupled
+    bounds = selected.intervals(0.95).to_numpy()  # the 95 % intervals x ± t σ, one row per mode
     modes = []
     for i in range(selected.n_modes):
         shape = {}
@@ -64,6 +65,8 @@ def selected_modes_to_dict(selected) -> dict:
             "frequency_spread": num(selected.frequency_spread[i]),
             "damping_ratio": num(selected.damping_ratio[i]), "damping_std": num(selected.damping_std[i]),
             "damping_spread": num(selected.damping_spread[i]),
+            "frequency_interval_95_hz": [num(bounds[i, 0]), num(bounds[i, 1])],
+            "damping_interval_95": [num(bounds[i, 2]), num(bounds[i, 3])],
             "representative_order": int(selected.representative_order[i]),
             "shape_order": int(selected.shape_order[i]),
             "n_poles": int(selected.n_poles[i]), "order_min": int(selected.order_min[i]),
@@ -84,6 +87,9 @@ def selected_modes_to_dict(selected) -> dict:
                              for f, n, r in zip(selected.dropped_frequency_hz, selected.dropped_n_poles,
                                                 selected.dropped_reason)],
         "min_cluster_size": int(selected.min_cluster_size),
+        # how the intervals were formed: x ± factor σ, the Student-t quantile of n_blocks - 1 (0: unknown)
+        "interval_95": {"level": 0.95, "factor": num(selected.interval_factor(0.95)),
+                        "n_blocks": int(selected.n_blocks)},
         # H within 3 std of its estimation noise: every mode may be noise (SelectedModes.low_signal_to_noise)
         "low_signal_to_noise": bool(selected.low_signal_to_noise),
         "clustering": selected.settings.to_dict(),
@@ -139,6 +145,12 @@ def diagram_to_xarray(diagram, selected=None, attrs: dict | None = None, geometr
                      "representative_pole", "shape_order", "shape_pole", "n_poles", "order_min", "order_max",
                      "min_mac"):
             pole_vars[f"selected_{name}"] = (("mode",), getattr(sel, name), {})
+        t95 = sel.interval_factor(0.95)
+        for name, column in zip(sel.INTERVAL_95_COLUMNS, sel.intervals(0.95).to_numpy().T):
+            pole_vars[f"selected_{name}"] = (
+                ("mode",), column, {"units": "Hz" if name.endswith("_hz") else "1",
+                 "long_name": f"95 % interval bound: value +- {t95:.4f} std (Student t, n_blocks - 1 = "
+                              f"{max(sel.n_blocks - 1, 0)} degrees of freedom; 0: unknown, normal quantile)"})
         pole_vars["selected_mpc"] = (("mode",), sel.mpc, {"units": "1", "long_name": "modal phase collinearity"})
         pole_vars["selected_mpc_std"] = (("mode",), sel.mpc_std, {"units": "1"})
         pole_vars["selected_mpd"] = (("mode",), sel.mpd_deg, {"units": "degree", "long_name": "mean phase deviation"})
@@ -214,7 +226,7 @@ def report(diagram, selected, *, stamp: dict | None = None, extra: dict | None =
             "output_names": list(diagram.output_names),
         }
     sel = selected.to_dict()
-    out["clustering"] = {k: sel[k] for k in ("clustering", "min_cluster_size", "dropped_clusters")}
+    out["clustering"] = {k: sel[k] for k in ("clustering", "min_cluster_size", "dropped_clusters", "interval_95")}
     out["low_signal_to_noise"] = sel["low_signal_to_noise"]
     out["units"] = {"frequency_hz": "Hz", "damping_ratio": "fraction (0.02 = 2 %)",
                     "std": f"analytic (delta-method) standard deviation, {selected.std_words}"
@@ -232,6 +244,10 @@ def report(diagram, selected, *, stamp: dict | None = None, extra: dict | None =
                                   "k* is below the mode): its std are at least the poles' unfrozen bound rho*std",
                     "low_signal_to_noise": "H is within 3 std of its estimation noise: the modes cannot be told "
                                            "from noise",
+                    "frequency_interval_95_hz": "95 % interval [low, high] of f: value +- t std, t the Student-t "
+                                                "quantile with n_blocks - 1 degrees of freedom (clustering."
+                                                "interval_95): it covers 95 % where +-1.96 std covers less",
+                    "damping_interval_95": "95 % interval [low, high] of xi, as frequency_interval_95_hz",
                     "mpc": "modal phase collinearity (1: real shape), std to second order",
                     "mpd_deg": "mean phase deviation, degrees (0: real shape), first-order std",
                     "mode_shape": "normalised: largest-modulus component = 1"}

@@ -249,6 +249,14 @@ def _shape_bar_figure(go, selected, k):
 INDICATOR_COLUMNS = {"mpc": ("MPC", "mpc_std"), "mpd_deg": ("MPD [°]", "mpd_std_deg")}
 
 
+def _interval_note(selected) -> str:
+    """The sentence that says how to read a 95 % interval from the table (SelectedModes.interval_words)."""
+    words = getattr(selected, "interval_words", None)
+    if words is None or not selected.has_uncertainty or not selected.n_modes:
+        return ""
+    return " " + html.escape(words().replace("+-", "±").replace(" std", " σ")) + "."
+
+
 def _table(selected) -> str:
     rows = []
     flags = np.asarray(getattr(selected, "noise_coupled", np.zeros(selected.n_modes, bool)), bool)
@@ -345,7 +353,7 @@ def write_html_report(path, diagram, selected, *, geometry=None, spectrum=None, 
              "widened: f or ξ at the representative's order and at the lowest sufficient order differ by more "
              "than 1.96 of the two poles' combined σ, and σ includes that difference. rho*std: every pole of the "
              "mode depends on the frozen noise directions (the noise floor is below the mode), and σ is their "
-             "unfrozen bound ρσ.</p>"]
+             "unfrozen bound ρσ." + _interval_note(selected) + "</p>"]
     if selected.n_modes > 1:
         parts.append("<h2>MAC matrix</h2>" + div(_mac_figure(go, selected)))
     if selected.n_modes:

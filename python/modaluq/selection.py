@@ -25,6 +25,7 @@ import numpy as np
 
 from . import _core
 from .indicators import mac_matrix, mean_phase_deviation, modal_phase_collinearity, shape_covariance
+from .intervals import interval_factor
 from .settings import ClusteringSettings
 
 __all__ = ["DropReason", "SelectedModes", "default_cluster_std", "dropped_reason_text", "select_modes"]
@@ -214,7 +215,13 @@ class SelectedModes:
     #: representative where it is lower and of order ≥ 2 m), with ``"median"`` ``representative_pole``
     shape_pole: np.ndarray | None = None
     shape_order: np.ndarray | None = None  #: (n_modes,) its model order
+    #: blocks the σ were estimated from (``Result.n_blocks``, the core's count): an interval x ± t σ
+    #: takes the Student-t quantile with ``n_blocks − 1`` degrees of freedom (:meth:`intervals`).
+    #: 0: unknown (made by hand, a campaign's merged modes) or no uncertainty: the normal quantile
+    n_blocks: int = 0
 
+    #: the columns of the 95 % intervals in :meth:`to_dataframe` and the exports (:meth:`intervals`)
+    INTERVAL_95_COLUMNS = ("frequency_low_95_hz", "frequency_high_95_hz", "damping_low_95", "damping_high_95")
     #: the heading of :meth:`__str__` when :attr:`low_signal_to_noise`
     LOW_SIGNAL_TO_NOISE_HEADING = ("H is within 3 std of its estimation noise: these modes cannot be told from "
                                    "noise and may all be noise")
@@ -252,12 +259,43 @@ class SelectedModes:
     def n_modes(self) -> int:
         return int(self.frequency_hz.size)
 
+    def interval_factor(self, level: float = 0.95) -> float:
+        """The factor t of the ``level`` intervals x ± t σ (:func:`modaluq.intervals.interval_factor`):
+        the Student-t quantile with ``n_blocks − 1`` degrees of freedom, since each σ is estimated
+        from ``n_blocks`` blocks (2.14 at 15 blocks, 2.01 at 50); the normal 1.96 when
+        ``n_blocks`` is unknown (0)."""
+        return interval_factor(self.n_blocks, level)
+
+    def intervals(self, level: float = 0.95):
+        """The ``level`` confidence intervals of f and ξ, one row per mode (numbered from 1):
+        ``frequency_low_hz``, ``frequency_high_hz`` (Hz), ``damping_low``, ``damping_high``
+        (fraction), x ± t σ with t = :meth:`interval_factor`. With σ from ``n_blocks`` blocks
+        they cover ``level`` where x ± 1.96 σ covers less (93.0 % at 15 blocks); NaN without
+        uncertainty (docs/uq-math.md §14)."""
+        import pandas as pd
+
+        t = self.interval_factor(level)
+        f_half, xi_half = t * self.frequency_std, t * self.damping_std
+        return pd.DataFrame({"frequency_low_hz": self.frequency_hz - f_half,
+                             "frequency_high_hz": self.frequency_hz + f_half,
+                             "damping_low": self.damping_ratio - xi_half,
+                             "damping_high": self.damping_ratio + xi_half},
+                            index=pd.RangeIndex(1, self.n_modes + 1, name="mode"))
+
+    def interval_words(self, level: float = 0.95) -> str:
+        """The line under the tables that says how to read a ``level`` interval from them."""
+        t = self.interval_factor(level)
+        law = (f"Student t of {self.n_blocks} blocks" if self.n_blocks >= 2
+               else "normal quantile: the number of blocks is unknown")
+        return f"{100 * level:g} % intervals: value +- {t:.3f} std ({law})"
+
     def __len__(self) -> int:
         return self.n_modes
 
     def to_dataframe(self):
         """One row per mode, numbered from 1 (the index ``mode``, as in every table, plot and
-        export): f, σ_f, spread, ξ, σ_ξ, spread, cluster size and orders, and the shape per
+        export): f, σ_f, spread, ξ, σ_ξ, spread, the 95 % intervals (``frequency_low_95_hz`` ...,
+        :meth:`intervals`), cluster size and orders, and the shape per
         channel in columns ``mode_shape_<channel>_real`` ...; ``noise_coupled`` flags a mode every
         pole of which is noise-coupled (:attr:`noise_coupled`), ``order_discrepancy`` one whose σ
         the model order widened (:attr:`order_discrepancy`), ``low_signal_to_noise`` (the same
@@ -269,6 +307,8 @@ class SelectedModes:
             "frequency_spread": self.frequency_spread,
             "damping_ratio": self.damping_ratio, "damping_std": self.damping_std,
             "damping_spread": self.damping_spread,
+            # the 95 % intervals x ± t σ (intervals(): the Student-t quantile of the blocks)
+            **dict(zip(self.INTERVAL_95_COLUMNS, self.intervals(0.95).to_numpy().T)),
             "representative_order": self.representative_order, "shape_order": self.shape_order,
             "n_poles": self.n_poles,
             "order_min": self.order_min, "order_max": self.order_max, "min_mac": self.min_mac,
@@ -315,6 +355,8 @@ class SelectedModes:
             lines.append(self.ORDER_DISCREPANCY_LEGEND)
         if self.unanchored.any():
             lines.append(self.UNANCHORED_LEGEND)
+        if self.has_uncertainty and self.n_modes:
+            lines.append(self.interval_words())
         return "\n".join(lines)
 
     @property
@@ -493,10 +535,16 @@ def select_modes(diagram, settings: ClusteringSettings | None = None, **kwargs) 
         noise_coupled=np.array([m.size > 0 and bool(np.asarray(diagram.noise_coupled, bool)[m].all())
                                 for m in (np.asarray(m, np.int64) for m in sel.members)], dtype=bool),
         low_signal_to_noise=bool(getattr(diagram, "low_signal_to_noise", False)),
+        n_blocks=_n_blocks(diagram),
     )
     # the words from the codes and numbers (the core's own words are for its C++ users)
     reasons = tuple(dropped_reason_text(modes, k) for k in range(len(modes.dropped_code)))
     return dataclasses.replace(modes, dropped_reason=reasons, **_shape_indicators(diagram, modes))
+
+
+def _n_blocks(diagram) -> int:
+    """The blocks behind the diagram's σ (``Diagram.n_blocks``, the core's count); 0 without uncertainty."""
+    return int(diagram.n_blocks) if diagram.has_uncertainty else 0
 
 
 def _shape_indicators(diagram, modes: SelectedModes) -> dict:

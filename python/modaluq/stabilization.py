@@ -145,6 +145,9 @@ class Diagram:
     #: (``Modes.frequency_damping_factor``), from which the selection forms the σ of a cluster's
     #: mean (``ClusteringSettings.cluster_std``); empty (0 poles) when unknown
     frequency_damping_factor: np.ndarray = field(default_factory=lambda: np.zeros((0, 2, 0)))
+    #: blocks behind every σ (``Result.n_blocks``: the core's, which can be more than the ``n_blocks``
+    #: asked for, the remainder of the record cut into whole blocks too); 0 without uncertainty or unknown
+    n_blocks: int = 0
 
     @property
     def n_poles(self) -> int:
@@ -343,6 +346,7 @@ def stabilization_diagram(result, criteria: StabilityCriteria | None = None, *,
         noise_coupling=p.noise_coupling,
         frequency_damping_factor=_factor_per_pole(p.frequency_damping_factor, n_poles),
         n_samples=int(getattr(result, "n_samples", 0)),
+        n_blocks=int(getattr(result, "n_blocks", 0) or 0) if has_std else 0,
         low_signal_to_noise=bool(getattr(result, "low_signal_to_noise", False)),
         noise_floor_order=int(p.noise_floor_order),
     )

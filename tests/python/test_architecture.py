@@ -22,7 +22,7 @@ LAYERS = {
     "modaluq.checks": 1, "modaluq.buildinfo": 1, "modaluq.jsonvalues": 1, "modaluq.atomic": 1,
     # settings and the signal helpers they are applied with; the side leaves (files, simulator)
     "modaluq.settings": 2, "modaluq.preprocess": 2, "modaluq.auto_settings": 2, "modaluq.spectrum": 2,
-    "modaluq.indicators": 2,
+    "modaluq.indicators": 2, "modaluq.intervals": 2,
     "modaluq.harmonics": 2, "modaluq.provenance": 2, "modaluq.geometry": 2, "modaluq.simulate.*": 2, "modaluq.io.*": 2,
     "modaluq.monitoring.simulator": 2,  # the monitoring wing's campaign simulator: a side leaf
     # The result types sit above what their convenience methods reach (Result.plot() ->

@@ -84,12 +84,22 @@ def _without_shapes_line(text: str) -> str:
     return "\n".join(line for line in text.split("\n") if not line.startswith(SHAPES_LINE))
 
 
+INTERVAL_LINE = "95 % intervals: value +- "
+
+
+def _without_interval_line(text: str) -> str:
+    """The tables of selected modes end with the factor of their 95 % intervals (docs/uq-math.md
+    §14), which came after the expected output; the test below checks that the line is there."""
+    return "\n".join(line for line in text.split("\n") if not line.startswith(INTERVAL_LINE))
+
+
 def _printed(a) -> dict:
     """Everything a run prints that words the core's findings."""
     sel = a.selected
-    return {"analysis": str(a), "warnings": list(a.warnings), "result_warnings": list(a.result.warnings),
-            "result": _without_shapes_line(str(a.result)), "selected": str(sel),
-            "dropped_reason": list(sel.dropped_reason)}
+    return {"analysis": _without_interval_line(str(a)), "warnings": list(a.warnings),
+            "result_warnings": list(a.result.warnings),
+            "result": _without_interval_line(_without_shapes_line(str(a.result))),
+            "selected": _without_interval_line(str(sel)), "dropped_reason": list(sel.dropped_reason)}
 
 
 
@@ -159,6 +169,22 @@ def test_the_results_table_ends_with_the_shape_orders():
     assert line == [f"{SHAPES_LINE} (the representative's where lower and of order >= 2 x modes), with its own std (orders "
                     + ", ".join(str(int(o)) for o in sel.shape_order) + ")"]
     assert SHAPES_LINE not in str(a.selected)  # the cases read the shapes at the representative
+
+
+@pytest.mark.parametrize("name", CASES)
+def test_the_tables_of_selected_modes_end_with_the_interval_factor(name):
+    """With uncertainty, the table says how to read a 95 % interval: ± t σ, t the Student-t quantile
+    of the blocks' n_blocks − 1 (SciPy's here); without, it says nothing of intervals."""
+    from scipy.stats import t as student_t
+
+    sel = _run(name).selected
+    lines = [x for x in str(sel).split("\n") if x.startswith(INTERVAL_LINE)]
+    if not sel.has_uncertainty:
+        assert lines == [] and sel.n_blocks == 0
+        return
+    n = sel.n_blocks
+    assert n == _run(name).result.n_blocks >= 2
+    assert lines == [f"{INTERVAL_LINE}{student_t.ppf(0.975, n - 1):.3f} std (Student t of {n} blocks)"]
 
 
 @pytest.mark.parametrize("name", CASES)

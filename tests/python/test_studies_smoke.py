@@ -105,7 +105,7 @@ def test_selected_members_mc(capsys, tmp_path):
     text = capsys.readouterr().out
     assert "| no order check |" in text and "σ widened by the order" in text
     assert "| unanchored (ρ > 2): ρ σ |" in text
-    assert "| t of n_blocks − 1 |" in text and row["n_blocks"] >= 2
+    assert "| interval ± t σ (t of n_blocks − 1) |" in text and row["n_blocks"] >= 2
     assert "true modes found / modes selected per record" in text and "no pole reassign [" in text
     # capped at 3 k*: no member of any selected mode above it
     capped = mod.run(2, "frame", duration=60.0, k_star_factor=3.0)

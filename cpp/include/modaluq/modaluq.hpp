@@ -7,6 +7,7 @@
 #include "errors.hpp"
 #include "identify.hpp"
 #include "indicators.hpp"
+#include "interval.hpp"
 #include "layout.hpp"
 #include "modal.hpp"
 #include "multisetup.hpp"

@@ -214,7 +214,9 @@ def register(subparsers) -> None:
         "against their sigma: z = (x1 - x2) / sqrt(s1^2 + s2^2); if sigma is right, RMS z is about 1 and 95 % "
         "of the z are within +-1.96. Each half is also read with its own sigma, z = (x1 - x2) / (sqrt(2) s_h): "
         "the coverage of one record's interval, which the combined z can overstate when sigma scatters from "
-        "record to record. --block-rows, --past-block-rows, --n-blocks, --order (the diagram's orders) "
+        "record to record, and within the half's 95 % interval +- t sigma (t the Student-t quantile of its "
+        "n_blocks - 1, as SelectedModes.intervals gives). --block-rows, --past-block-rows, --n-blocks, "
+        "--order (the diagram's orders) "
         "and --tolerance (the relative frequency difference that pairs two modes, default 0.02) apply too.")
     within = inspect.signature(split_halves).parameters["pair_within_std"].default
     g.add_argument("--split-halves", metavar="FILE", default=None, help="the record (any format of modaluq identify)")

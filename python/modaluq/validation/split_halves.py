@@ -49,6 +49,9 @@ class SplitHalves(ModeComparison):
 
     halves_s: tuple = ()
     settings: dict = None
+    #: (n_pairs,) the factor t of each pair's 95 % intervals x ± t σ (``SelectedModes.interval_factor``:
+    #: the Student-t quantile of the halves' n_blocks − 1); None: unknown, 1.96
+    interval_factor_95: np.ndarray | None = None
 
     @property
     def z_frequency_own_sigma(self) -> np.ndarray:
@@ -63,11 +66,22 @@ class SplitHalves(ModeComparison):
     def summary(self) -> dict:
         """:meth:`ModeComparison.summary`, and the same of the per-record reading (each half's own σ,
         both halves' z counted): ``rms_z_frequency_own_sigma``, ``within_frequency_own_sigma``,
-        ``rms_z_damping_own_sigma``, ``within_damping_own_sigma``."""
+        ``rms_z_damping_own_sigma``, ``within_damping_own_sigma``; and the share of the halves'
+        95 % intervals x ± t σ (``SelectedModes.intervals``) that the per-record reading holds,
+        ``within_frequency_own_interval``, ``within_damping_own_interval`` (|z| ≤ t)."""
         out = super().summary()
+        factor = self._factor()
         for name, z in (("frequency", self.z_frequency_own_sigma), ("damping", self.z_damping_own_sigma)):
             out[f"rms_z_{name}_own_sigma"], out[f"within_{name}_own_sigma"] = rms_and_within(z)
+            # the product's 95 % interval x ± t σ read alike: |z| ≤ t of the pair's blocks
+            out[f"within_{name}_own_interval"] = rms_and_within(z / (factor[:, None] / 1.96))[1]
         return out
+
+    def _factor(self) -> np.ndarray:
+        """(n_pairs,) each pair's interval factor (1.96 where unknown)."""
+        if self.interval_factor_95 is None:
+            return np.full(self.frequency_hz.shape[0], 1.96)
+        return np.asarray(self.interval_factor_95, float)
 
     def to_dataframe(self):
         """:meth:`ModeComparison.to_dataframe` with the per-record reading's z of each half
@@ -87,7 +101,9 @@ class SplitHalves(ModeComparison):
             body += ["", f"Each half's own σ (z = Δ / (√2 σ of that half), the per-record reading): RMS z "
                          f"{s['rms_z_frequency_own_sigma']:.2f} (f), {s['rms_z_damping_own_sigma']:.2f} (ξ); within "
                          f"±1.96: {100 * s['within_frequency_own_sigma']:.0f} % (f), "
-                         f"{100 * s['within_damping_own_sigma']:.0f} % (ξ). " + OWN_SIGMA_NOTE]
+                         f"{100 * s['within_damping_own_sigma']:.0f} % (ξ); within the 95 % interval ± t σ "
+                         f"(t = {self._factor()[0]:.3f}): {100 * s['within_frequency_own_interval']:.0f} % (f), "
+                         f"{100 * s['within_damping_own_interval']:.0f} % (ξ). " + OWN_SIGMA_NOTE]
         return "\n".join([f"## Split halves: {a0:g}-{a1:g} s against {b0:g}-{b1:g} s", "",
                           "Settings of both halves: " + ", ".join(f"{k} {v}" for k, v in (self.settings or {}).items()),
                           "", *body]) + "\n"
@@ -130,7 +146,8 @@ class PooledSplitHalves:
         chosen = [c for n, _, c in self.checks if n_windows is None or n == n_windows]
         if not chosen:
             empty2, empty = np.empty((0, 2)), np.empty(0)
-            return SplitHalves(empty2, empty2, empty2, empty2, empty, halves_s=(), settings={})
+            return SplitHalves(empty2, empty2, empty2, empty2, empty, halves_s=(), settings={},
+                               interval_factor_95=np.empty(0))
 
         def cat(name):
             return np.concatenate([getattr(c, name) for c in chosen])
@@ -138,6 +155,7 @@ class PooledSplitHalves:
         # every per-pair array of ModeComparison joined; the unpaired modes side by side; one pairing
         joined = {f.name: cat(f.name) for f in fields(ModeComparison) if f.name not in ("unmatched_hz", "pairing")}
         return SplitHalves(**joined, halves_s=tuple(c.halves_s for c in chosen), settings={},
+                           interval_factor_95=np.concatenate([c._factor() for c in chosen]),
                            unmatched_hz=tuple(np.concatenate([c.unmatched_hz[k] for c in chosen]) for k in (0, 1)),
                            pairing=chosen[0].pairing)
 
@@ -171,15 +189,16 @@ class PooledSplitHalves:
                  "RMS z ≈ 1 and about 95 % within ±1.96, over many pairs; with n pairs an RMS z is known to about "
                  "±1/√(2n). A structure that changes between halves (temperature, an operating machine, people on a "
                  "floor) raises z without σ being wrong.", "",
-                 "The last two columns read each half with its own σ, z = Δ / (√2 σ of that half), both halves' z "
-                 "counted. " + OWN_SIGMA_NOTE, "",
+                 "The last three columns read each half with its own σ, z = Δ / (√2 σ of that half), both halves' z "
+                 "counted; the last, the share within each half's 95 % interval ± t σ (t the Student-t quantile of "
+                 "its n_blocks − 1, SelectedModes.intervals). " + OWN_SIGMA_NOTE, "",
                  "| windows | pairs | RMS z f, ξ (± about) | within ±1.96 f, ξ | RMS z_MAC, \"same mode\" rejected "
-                 "| own σ: RMS z f, ξ | own σ: within ±1.96 f, ξ |",
-                 "|---|---|---|---|---|---|---|"]
+                 "| own σ: RMS z f, ξ | own σ: within ±1.96 f, ξ | own σ: within ± t σ f, ξ |",
+                 "|---|---|---|---|---|---|---|---|"]
         for label, n in [*((f"{n}", n) for n in self.levels), ("**all**", None)]:
             s = self.pooled(n).summary()
             if not s["n_pairs"]:
-                lines.append(f"| {label} | 0 | — | — | — | — | — |")
+                lines.append(f"| {label} | 0 | — | — | — | — | — | — |")
                 continue
             lines.append(f"| {label} | {s['n_pairs']} | {s['rms_z_frequency']:.2f}, {s['rms_z_damping']:.2f} "
                          f"(±{1 / np.sqrt(2 * s['n_pairs']):.2f}) | "
@@ -187,7 +206,9 @@ class PooledSplitHalves:
                          f"{s['rms_z_mac']:.2f}, {100 * s['same_mode_rejected']:.0f} % | "
                          f"{s['rms_z_frequency_own_sigma']:.2f}, {s['rms_z_damping_own_sigma']:.2f} | "
                          f"{100 * s['within_frequency_own_sigma']:.0f} %, "
-                         f"{100 * s['within_damping_own_sigma']:.0f} % |")
+                         f"{100 * s['within_damping_own_sigma']:.0f} % | "
+                         f"{100 * s['within_frequency_own_interval']:.0f} %, "
+                         f"{100 * s['within_damping_own_interval']:.0f} % |")
         for level in self.levels:  # a few failures each; beyond three, the first and a count
             mine = [f for f in self.failed if f[0] == level]
             for n, k, (a, b), message in mine[:1] if len(mine) > 3 else mine:
@@ -302,7 +323,8 @@ def split_halves(analysis: Analysis, *, max_frequency_difference: float = 0.02, 
     runs, halves_s = _run_halves(analysis)
     c = compare_modes(runs[0].selected, runs[1].selected, **pairing)
     used = runs[0].result.settings
+    factor = runs[0].selected.interval_factor(0.95)  # both halves: the same n_blocks
     return SplitHalves(**{f.name: getattr(c, f.name) for f in fields(ModeComparison)},
-                       halves_s=halves_s,
+                       halves_s=halves_s, interval_factor_95=np.full(c.frequency_hz.shape[0], factor),
                        settings={k: used[k] for k in ("block_rows", "past_block_rows", "n_blocks")} | {
                            "orders": f"{min(used['orders'])}-{max(used['orders'])}"})

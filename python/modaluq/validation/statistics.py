@@ -15,6 +15,7 @@ import numpy as np
 
 from ..atomic import csv_cell
 from ..checks import check_boolean
+from ..intervals import interval_factor
 from ..jsonvalues import dumps
 from .paper import METHOD_LABELS, METHODS
 
@@ -99,6 +100,20 @@ def _shape_ratio(shape, std_re, std_im, ref, use):
     return out
 
 
+def blocks_used(settings: dict) -> int:
+    """The blocks the core formed for a run's records (``Result.n_blocks``): block length
+    ⌊N_c / n_blocks⌋ over N_c = n_samples − (block_rows + past_block_rows − 1) Hankel columns,
+    so more than ``n_blocks`` when the remainder holds whole blocks (``compute_covariances`` in
+    covariance.hpp). The ``n_blocks`` asked for where the run's settings lack the horizons; 0
+    without it."""
+    n_b = int(settings.get("n_blocks") or 0)
+    n, p, q = (settings.get(k) for k in ("n_samples", "block_rows", "past_block_rows"))
+    if n_b < 2 or not all(isinstance(v, int) and v > 0 for v in (n, p, q)):
+        return n_b
+    columns = n - (p + q - 1)
+    return columns // (columns // n_b) if columns >= n_b else n_b
+
+
 @dataclass(frozen=True, repr=False, eq=False)
 class MonteCarloResult:
     """What :func:`monte_carlo` returns: per-record estimates and their summary.
@@ -177,6 +192,10 @@ class MonteCarloResult:
     #: (0.95 when σ is right and the estimates are normal)
     frequency_coverage_unflagged: np.ndarray = field(init=False)
     damping_coverage_unflagged: np.ndarray = field(init=False)
+    #: (2, n_modes) the same share for the 95 % interval ± t σ (``SelectedModes.intervals``: t the
+    #: Student-t quantile with n_blocks − 1 degrees of freedom; 1.96 when n_blocks is unknown)
+    frequency_coverage_interval_unflagged: np.ndarray = field(init=False)
+    damping_coverage_interval_unflagged: np.ndarray = field(init=False)
 
     def __post_init__(self):
         rng = np.random.default_rng(np.random.SeedSequence([int(self.settings.get("seed", 0)), 1]))
@@ -209,6 +228,7 @@ class MonteCarloResult:
         matched = np.isfinite(self.frequency_hz)
         with np.errstate(invalid="ignore"):
             set_(self, "noise_coupled_share", (coupled & matched).sum(axis=1) / matched.sum(axis=1))
+        t95 = interval_factor(blocks_used(self.settings), 0.95)
         for name, values, stds in (("frequency", self.frequency_hz, self.frequency_std),
                                    ("damping", self.damping_ratio, self.damping_std)):
             clean = [_summary(np.where(coupled[m], np.nan, values[m]), stds[m], rng, 0) for m in range(n_methods)]
@@ -220,9 +240,10 @@ class MonteCarloResult:
                 ok = np.isfinite(z)
                 rms = np.sqrt(np.where(ok, z * z, 0).sum(axis=1) / ok.sum(axis=1))
             set_(self, f"{name}_rms_z_unflagged", np.where(ok.sum(axis=1) >= 2, rms, np.nan))
-            with np.errstate(invalid="ignore"):
-                cover = np.where(ok, np.abs(z) <= 1.96, False).sum(axis=1) / ok.sum(axis=1)
-            set_(self, f"{name}_coverage_unflagged", np.where(ok.sum(axis=1) >= 2, cover, np.nan))
+            for key, factor in (("coverage_unflagged", 1.96), ("coverage_interval_unflagged", t95)):
+                with np.errstate(invalid="ignore"):
+                    cover = np.where(ok, np.abs(z) <= factor, False).sum(axis=1) / ok.sum(axis=1)
+                set_(self, f"{name}_{key}", np.where(ok.sum(axis=1) >= 2, cover, np.nan))
         if self.mode_shape is not None and self.mode_shape_std_real is not None:
             set_(self, "mode_shape_std_ratio_median", np.stack([
                 _shape_ratio(self.mode_shape[m], self.mode_shape_std_real[m], self.mode_shape_std_imag[m],

@@ -75,6 +75,14 @@ def test_each_half_read_with_its_own_sigma(record):
     assert "Each half's own σ" in check.report()
     pooled = split_halves_windows(a, (1,))
     assert "own σ: within ±1.96 f, ξ" in pooled.report()
+    # (q): the halves' 95 % intervals ± t σ, t the Student-t quantile of their n_blocks − 1 (SciPy's)
+    from scipy.stats import t as student_t
+
+    factor = student_t.ppf(0.975, check.settings["n_blocks"] - 1)
+    assert s["within_damping_own_interval"] == pytest.approx(np.mean(abs(both) <= factor), rel=1e-12)
+    assert f"(t = {factor:.3f})" in check.report() and "own σ: within ± t σ f, ξ" in pooled.report()
+    assert pooled.pooled().summary()["within_damping_own_interval"] == pytest.approx(
+        np.mean(abs(np.concatenate([c.z_damping_own_sigma.T.ravel() for _, _, c in pooled.checks])) <= factor))
     # with equal σ in both halves the two readings are one: √(σ² + σ²) = √2 σ
     same = SplitHalves(f, np.column_stack([sf[:, 0], sf[:, 0]]), x, np.column_stack([sx[:, 0], sx[:, 0]]), check.mac)
     assert same.z_frequency_own_sigma[:, 1] == pytest.approx(same.z_frequency, rel=1e-12)

@@ -77,6 +77,12 @@ def test_summary_is_the_statistics_of_the_arrays(mc200):
     assert mc200.frequency_rms_z_unflagged[m, i] == pytest.approx(np.sqrt(np.mean(z ** 2)), rel=1e-12)
     assert mc200.frequency_coverage_unflagged[m, i] == pytest.approx(np.mean(np.abs(z) <= 1.96), rel=1e-12)
     assert "coverage of ±1.96 σ (f), unflagged" in mc200.report()
+    # the 95 % interval: Student's t with 50 - 1 degrees of freedom (SciPy's, not the package's)
+    from scipy.stats import t as student_t
+
+    factor = student_t.ppf(0.975, 49)
+    assert mc200.frequency_coverage_interval_unflagged[m, i] == pytest.approx(np.mean(np.abs(z) <= factor), rel=1e-12)
+    assert "coverage of the 95 % interval ± t σ (f), unflagged" in mc200.report()
 
 
 # --------------------------------------------------------------------------- the tool
