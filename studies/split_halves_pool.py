@@ -345,7 +345,7 @@ def stats(rows):
         out[f"rms own {key}"], out[f"within own {key}"] = rms_and_within(own)
         # (q): the product's 95 % interval ± t σ, t of the half's n_blocks − 1 (SelectedModes.intervals)
         factor = np.array([r["interval_factor"] for r in rows for h in (1, 2)], float)
-        out[f"within own interval {key}"] = rms_and_within(own * 1.96 / factor)[1] if rows else np.nan
+        out[f"within own interval {key}"] = rms_and_within(own * Z_95 / factor)[1] if rows else np.nan
     return out
 
 

@@ -19,7 +19,7 @@ import statistics
 from . import _core
 from .checks import check_integer, check_real
 
-__all__ = ["interval_factor", "normal_coverage"]
+__all__ = ["interval_factor", "interval_table", "interval_words", "normal_coverage"]
 
 
 def interval_factor(n_blocks: int, level: float = 0.95) -> float:
@@ -48,3 +48,23 @@ def normal_coverage(n_blocks: int, factor: float = 1.96) -> float:
     if n == 1:
         raise ValueError("n_blocks must be >= 2 (a σ needs two blocks) or 0 (unknown); got 1")
     return float(_core.student_t_probability(factor, n - 1))
+
+
+def interval_table(frequency_hz, frequency_std, damping_ratio, damping_std, factor: float):
+    """The intervals x ± factor σ of f and ξ, one row per mode (numbered from 1, as every table):
+    ``frequency_low_hz``, ``frequency_high_hz`` (Hz), ``damping_low``, ``damping_high`` (fraction);
+    NaN where σ is. What ``SelectedModes.intervals`` and ``Modes.intervals`` return."""
+    import numpy as np
+    import pandas as pd
+
+    f, sf, xi, sxi = (np.asarray(v, float) for v in (frequency_hz, frequency_std, damping_ratio, damping_std))
+    return pd.DataFrame({"frequency_low_hz": f - factor * sf, "frequency_high_hz": f + factor * sf,
+                         "damping_low": xi - factor * sxi, "damping_high": xi + factor * sxi},
+                        index=pd.RangeIndex(1, f.size + 1, name="mode"))
+
+
+def interval_words(n_blocks: int, level: float = 0.95) -> str:
+    """The line under a table of modes that says how to read its ``level`` intervals."""
+    t = interval_factor(n_blocks, level)
+    law = f"Student t of {n_blocks} blocks" if n_blocks >= 2 else "normal quantile: the number of blocks is unknown"
+    return f"{100 * level:g} % intervals: value +- {t:.3f} std ({law})"

@@ -8,6 +8,7 @@ fields), so those methods import downwards (docs/architecture.md).
 
 from __future__ import annotations
 
+import dataclasses
 import enum
 import warnings
 from dataclasses import dataclass, field
@@ -15,6 +16,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .checks import check_boolean
+from .intervals import interval_factor, interval_table, interval_words
 from .selection import select_modes
 from .stabilization import stabilization_diagram
 
@@ -112,6 +114,9 @@ class Modes:
     bootstrapped: np.ndarray | None = None
     degenerate: bool = False                     #: no modes: above the numerical rank of H, or A not decomposable
     note: str = ""                               #: why the order is degenerate
+    #: blocks behind the σ (``Result.n_blocks``): the intervals x ± t σ take the Student-t quantile
+    #: of ``n_blocks − 1`` (:meth:`intervals`); 0 without uncertainty or unknown (the normal quantile)
+    n_blocks: int = 0
 
     @classmethod
     def _from_core(cls, m) -> "Modes":
@@ -191,6 +196,21 @@ class Modes:
             data[f"mode_shape_{names[k]}"] = self.mode_shape[k]
         return pd.DataFrame(data, index=pd.RangeIndex(1, self.n_modes + 1, name="mode"))
 
+    def interval_factor(self, level: float = 0.95) -> float:
+        """The factor t of the ``level`` intervals x ± t σ: the Student-t quantile of ``n_blocks − 1``
+        (:func:`modaluq.intervals.interval_factor`; docs/uq-math.md §14)."""
+        return interval_factor(self.n_blocks, level)
+
+    def intervals(self, level: float = 0.95):
+        """The ``level`` intervals of f and ξ at this order, one row per mode, as
+        :meth:`SelectedModes.intervals <modaluq.SelectedModes.intervals>`: ``frequency_low_hz`` …
+        ``damping_high``, x ± t σ; NaN without uncertainty. Above the true order σ itself falls
+        short (docs/validation.md, issue 27 (e)): no quantile makes up for that."""
+        nan = np.full(self.n_modes, np.nan)
+        unc = self.has_uncertainty
+        return interval_table(self.frequency_hz, self.frequency_std if unc else nan, self.damping_ratio,
+                              self.damping_std if unc else nan, self.interval_factor(level))
+
     def table(self) -> str:
         """The modes as a plain-text table (frequency in Hz, damping in %)."""
         unc = self.has_uncertainty
@@ -213,7 +233,10 @@ class Modes:
         if self.degenerate:
             return f"order {self.order}: no modes ({self.note})"
         flag = "  (order cuts close singular values: std not meaningful)" if self.close_singular_values else ""
-        return f"order {self.order}: {self.n_modes} modes{flag}\n{self.table()}"
+        text = f"order {self.order}: {self.n_modes} modes{flag}\n{self.table()}"
+        if self.has_uncertainty and self.n_modes:
+            text += "\n" + interval_words(self.n_blocks)
+        return text
 
     def __repr__(self) -> str:
         f = np.array2string(self.frequency_hz, precision=3, separator=", ")
@@ -419,7 +442,8 @@ def result_from_core(ident, settings, n_outputs, n_inputs, extra_warnings=(), ou
     core_words = tuple((worded or {}).get(c, w) for c, w in zip(codes, ident.warnings))
     result = Result(
         output_names=tuple(output_names) or tuple(f"y{k}" for k in range(n_outputs)),
-        modes=tuple(Modes._from_core(m) for m in ident.modes),
+        # each order's modes know the blocks behind their σ (their intervals' quantile)
+        modes=tuple(dataclasses.replace(Modes._from_core(m), n_blocks=int(ident.n_blocks)) for m in ident.modes),
         fs=settings["fs"],
         settings=settings,
         singular_values=ident.singular_values,

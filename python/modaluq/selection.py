@@ -25,7 +25,7 @@ import numpy as np
 
 from . import _core
 from .indicators import mac_matrix, mean_phase_deviation, modal_phase_collinearity, shape_covariance
-from .intervals import interval_factor
+from .intervals import interval_factor, interval_table, interval_words
 from .settings import ClusteringSettings
 
 __all__ = ["DropReason", "SelectedModes", "default_cluster_std", "dropped_reason_text", "select_modes"]
@@ -272,22 +272,12 @@ class SelectedModes:
         (fraction), x ± t σ with t = :meth:`interval_factor`. With σ from ``n_blocks`` blocks
         they cover ``level`` where x ± 1.96 σ covers less (93.0 % at 15 blocks); NaN without
         uncertainty (docs/uq-math.md §14)."""
-        import pandas as pd
-
-        t = self.interval_factor(level)
-        f_half, xi_half = t * self.frequency_std, t * self.damping_std
-        return pd.DataFrame({"frequency_low_hz": self.frequency_hz - f_half,
-                             "frequency_high_hz": self.frequency_hz + f_half,
-                             "damping_low": self.damping_ratio - xi_half,
-                             "damping_high": self.damping_ratio + xi_half},
-                            index=pd.RangeIndex(1, self.n_modes + 1, name="mode"))
+        return interval_table(self.frequency_hz, self.frequency_std, self.damping_ratio, self.damping_std,
+                              self.interval_factor(level))
 
     def interval_words(self, level: float = 0.95) -> str:
         """The line under the tables that says how to read a ``level`` interval from them."""
-        t = self.interval_factor(level)
-        law = (f"Student t of {self.n_blocks} blocks" if self.n_blocks >= 2
-               else "normal quantile: the number of blocks is unknown")
-        return f"{100 * level:g} % intervals: value +- {t:.3f} std ({law})"
+        return interval_words(self.n_blocks, level)
 
     def __len__(self) -> int:
         return self.n_modes

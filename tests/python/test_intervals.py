@@ -105,3 +105,18 @@ def test_the_blocks_a_monte_carlo_reads_are_the_cores(long_chain, n_samples, p, 
     settings = dict(n_samples=n_samples, block_rows=p, past_block_rows=q, n_blocks=n_blocks)
     assert blocks_used(settings) == res.n_blocks
     assert blocks_used(dict(n_blocks=n_blocks)) == n_blocks and blocks_used({}) == 0
+
+
+def test_each_orders_modes_give_their_intervals(selected, chain):
+    """Result.at_order(n): the same intervals per order (a diagram is read at every order)."""
+    result, _ = selected
+    t = student_t.ppf(0.975, 29)
+    for order in (12, 24):
+        m = result.at_order(order)
+        assert m.n_blocks == 30 and m.interval_factor() == pytest.approx(t, rel=1e-12)
+        iv = m.intervals()
+        np.testing.assert_allclose(iv["frequency_low_hz"], m.frequency_hz - t * m.frequency_std, rtol=1e-14)
+        np.testing.assert_allclose(iv["damping_high"], m.damping_ratio + t * m.damping_std, rtol=1e-12)
+        assert str(m).endswith(f"95 % intervals: value +- {t:.3f} std (Student t of 30 blocks)")
+    plain = modaluq.identify(chain.y, chain.u, fs=chain.fs, orders=[12], block_rows=15, uncertainty=False).at_order(12)
+    assert plain.n_blocks == 0 and np.isnan(plain.intervals().to_numpy()).all() and "intervals" not in str(plain)

@@ -34,7 +34,7 @@ import numpy as np
 
 from ..analysis import Analysis
 from ..checks import check_boolean, check_integers
-from ..comparison import ModeComparison, check_pairing, compare_modes, rms_and_within
+from ..comparison import Z_95, ModeComparison, check_pairing, compare_modes, rms_and_within
 
 __all__ = ["PooledSplitHalves", "SplitHalves", "split_halves", "split_halves_windows"]
 
@@ -50,7 +50,7 @@ class SplitHalves(ModeComparison):
     halves_s: tuple = ()
     settings: dict = None
     #: (n_pairs,) the factor t of each pair's 95 % intervals x ± t σ (``SelectedModes.interval_factor``:
-    #: the Student-t quantile of the halves' n_blocks − 1); None: unknown, 1.96
+    #: the Student-t quantile of the halves' n_blocks − 1); None: unknown, the normal 1.96
     interval_factor_95: np.ndarray | None = None
 
     @property
@@ -74,13 +74,13 @@ class SplitHalves(ModeComparison):
         for name, z in (("frequency", self.z_frequency_own_sigma), ("damping", self.z_damping_own_sigma)):
             out[f"rms_z_{name}_own_sigma"], out[f"within_{name}_own_sigma"] = rms_and_within(z)
             # the product's 95 % interval x ± t σ read alike: |z| ≤ t of the pair's blocks
-            out[f"within_{name}_own_interval"] = rms_and_within(z / (factor[:, None] / 1.96))[1]
+            out[f"within_{name}_own_interval"] = rms_and_within(z * (Z_95 / factor[:, None]))[1]
         return out
 
     def _factor(self) -> np.ndarray:
-        """(n_pairs,) each pair's interval factor (1.96 where unknown)."""
+        """(n_pairs,) each pair's interval factor (the normal quantile where unknown)."""
         if self.interval_factor_95 is None:
-            return np.full(self.frequency_hz.shape[0], 1.96)
+            return np.full(self.frequency_hz.shape[0], Z_95)
         return np.asarray(self.interval_factor_95, float)
 
     def to_dataframe(self):
