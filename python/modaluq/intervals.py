@@ -16,6 +16,8 @@ from __future__ import annotations
 
 import statistics
 
+import numpy as np
+
 from . import _core
 from .checks import check_integer, check_real
 
@@ -54,7 +56,6 @@ def interval_table(frequency_hz, frequency_std, damping_ratio, damping_std, fact
     """The intervals x ± factor σ of f and ξ, one row per mode (numbered from 1, as every table):
     ``frequency_low_hz``, ``frequency_high_hz`` (Hz), ``damping_low``, ``damping_high`` (fraction);
     NaN where σ is. What ``SelectedModes.intervals`` and ``Modes.intervals`` return."""
-    import numpy as np
     import pandas as pd
 
     f, sf, xi, sxi = (np.asarray(v, float) for v in (frequency_hz, frequency_std, damping_ratio, damping_std))
