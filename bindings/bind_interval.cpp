@@ -11,4 +11,5 @@ void modaluq::python::bind_interval(py::module_& m) {
     m.def("student_t_probability", &modaluq::student_t_probability, py::arg("t"), py::arg("dof"));
     m.def("student_t_quantile", &modaluq::student_t_quantile, py::arg("level"), py::arg("dof"));
     m.def("interval_factor", &modaluq::interval_factor, py::arg("n_blocks"), py::arg("level") = 0.95);
+    m.attr("max_interval_level") = modaluq::max_interval_level;
 }

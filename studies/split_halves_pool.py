@@ -173,7 +173,8 @@ def pairs_of_record(name, data, levels=LEVELS, tolerance=0.02, representative="m
             rows.append(dict(
                 group=group, record=name, n_windows=n, window=k, t0_s=t0, t1_s=t1, half_s=(t1 - t0) / 2,
                 block_rows=check.settings["block_rows"], n_blocks=check.settings["n_blocks"],
-                interval_factor=float(check.interval_factor_95[m]),  # t of the core's blocks − 1
+                # t of each half's core blocks − 1
+                interval_factor1=float(check.interval_factor_95[m, 0]), interval_factor2=float(check.interval_factor_95[m, 1]),
                 orders=check.settings["orders"], f1_hz=f[m, 0], f2_hz=f[m, 1],
                 sigma_f1_hz=sf[m, 0], sigma_f2_hz=sf[m, 1], xi1=x[m, 0], xi2=x[m, 1],
                 sigma_xi1=sx[m, 0], sigma_xi2=sx[m, 1], z_f=check.z_frequency[m], z_xi=check.z_damping[m],
@@ -344,7 +345,7 @@ def stats(rows):
         own = np.array([r[f"{key}_own{h}"] for r in rows for h in (1, 2)], float)
         out[f"rms own {key}"], out[f"within own {key}"] = rms_and_within(own)
         # (q): the product's 95 % interval ± t σ, t of the half's n_blocks − 1 (SelectedModes.intervals)
-        factor = np.array([r["interval_factor"] for r in rows for h in (1, 2)], float)
+        factor = np.array([r[f"interval_factor{h}"] for r in rows for h in (1, 2)], float)
         out[f"within own interval {key}"] = rms_and_within(own * Z_95 / factor)[1] if rows else np.nan
     return out
 

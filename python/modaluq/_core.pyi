@@ -8,7 +8,7 @@ import collections.abc
 import numpy
 import numpy.typing
 import typing
-__all__: list[str] = ['ClusterStd', 'ClusteringOptions', 'CovarianceAccumulator', 'CovarianceAccumulatorState', 'Covariances', 'Diagram', 'DropReason', 'HankelLayout', 'Identification', 'IdentificationWarning', 'IdentifyOptions', 'IndicatorStatistics', 'Linkage', 'Modes', 'NumericalError', 'PoleStatus', 'Poles', 'PoserOptions', 'PoserResult', 'PoserSetupModes', 'Representative', 'SelectedModes', 'SetupData', 'SetupsIdentification', 'SlowDecay', 'StabilityCriteria', 'blas_library', 'builds', 'cluster_labels', 'compute_covariances', 'cpu_path', 'eigen_simd', 'eigen_version', 'identify', 'identify_covariances', 'identify_setups', 'interval_factor', 'mean_phase_deviation', 'modal_assurance', 'modal_assurance_criterion', 'modal_assurance_statistics', 'modal_assurance_statistics_joint', 'modal_phase_collinearity', 'modal_phase_collinearity_statistics', 'poles_of', 'poser_merge', 'select_modes', 'stabilization_diagram', 'student_t_probability', 'student_t_quantile', 'uses_blas']
+__all__: list[str] = ['ClusterStd', 'ClusteringOptions', 'CovarianceAccumulator', 'CovarianceAccumulatorState', 'Covariances', 'Diagram', 'DropReason', 'HankelLayout', 'Identification', 'IdentificationWarning', 'IdentifyOptions', 'IndicatorStatistics', 'Linkage', 'Modes', 'NumericalError', 'PoleStatus', 'Poles', 'PoserOptions', 'PoserResult', 'PoserSetupModes', 'Representative', 'SelectedModes', 'SetupData', 'SetupsIdentification', 'SlowDecay', 'StabilityCriteria', 'blas_library', 'builds', 'cluster_labels', 'compute_covariances', 'cpu_path', 'eigen_simd', 'eigen_version', 'identify', 'identify_covariances', 'identify_setups', 'interval_factor', 'max_interval_level', 'mean_phase_deviation', 'modal_assurance', 'modal_assurance_criterion', 'modal_assurance_statistics', 'modal_assurance_statistics_joint', 'modal_phase_collinearity', 'modal_phase_collinearity_statistics', 'poles_of', 'poser_merge', 'select_modes', 'stabilization_diagram', 'student_t_probability', 'student_t_quantile', 'uses_blas']
 class NumericalError(ArithmeticError):
     pass
 class HankelLayout:
@@ -1375,4 +1375,5 @@ builds: dict[str, str]
 cpu_path: str
 eigen_simd: str
 eigen_version: str
+max_interval_level: float = 0.999999999
 uses_blas: bool

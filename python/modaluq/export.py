@@ -88,7 +88,8 @@ def selected_modes_to_dict(selected) -> dict:
                                                 selected.dropped_reason)],
         "min_cluster_size": int(selected.min_cluster_size),
         # how the intervals were formed: x ± factor σ, the Student-t quantile of n_blocks - 1 (0: unknown)
-        "interval_95": {"level": 0.95, "factor": num(selected.interval_factor(0.95)),
+        "interval_95": {"level": 0.95,
+                        "factor": num(selected.interval_factor(0.95)) if selected.has_uncertainty else None,
                         "n_blocks": int(selected.n_blocks)},
         # H within 3 std of its estimation noise: every mode may be noise (SelectedModes.low_signal_to_noise)
         "low_signal_to_noise": bool(selected.low_signal_to_noise),
@@ -145,12 +146,13 @@ def diagram_to_xarray(diagram, selected=None, attrs: dict | None = None, geometr
                      "representative_pole", "shape_order", "shape_pole", "n_poles", "order_min", "order_max",
                      "min_mac"):
             pole_vars[f"selected_{name}"] = (("mode",), getattr(sel, name), {})
-        t95 = sel.interval_factor(0.95)
+        law = (f"Student t, n_blocks - 1 = {sel.n_blocks - 1} degrees of freedom" if sel.n_blocks >= 2
+               else "normal quantile: the number of blocks is unknown")
         for name, column in zip(sel.INTERVAL_95_COLUMNS, sel.intervals(0.95).to_numpy().T):
             pole_vars[f"selected_{name}"] = (
                 ("mode",), column, {"units": "Hz" if name.endswith("_hz") else "1",
-                 "long_name": f"95 % interval bound: value +- {t95:.4f} std (Student t, n_blocks - 1 = "
-                              f"{max(sel.n_blocks - 1, 0)} degrees of freedom; 0: unknown, normal quantile)"})
+                                    "long_name": f"95 % interval bound: value +- {sel.interval_factor(0.95):.4f} "
+                                                 f"std ({law})"})
         pole_vars["selected_mpc"] = (("mode",), sel.mpc, {"units": "1", "long_name": "modal phase collinearity"})
         pole_vars["selected_mpc_std"] = (("mode",), sel.mpc_std, {"units": "1"})
         pole_vars["selected_mpd"] = (("mode",), sel.mpd_deg, {"units": "degree", "long_name": "mean phase deviation"})

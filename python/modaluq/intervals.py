@@ -3,13 +3,14 @@
 Every σ of modaluq is the sample standard deviation of ``n_blocks`` block values, scaled: for a
 Gaussian estimate linear in the blocks, (x − x_true)/σ follows Student's t with ``n_blocks − 1``
 degrees of freedom, not the normal law. So x ± 1.96 σ covers P(|t| ≤ 1.96), 93.0 % with 15
-blocks and 94.5 % with 50, and the interval that covers 95 % is x ± t σ with the t quantile:
+blocks and 94.4 % with 50, and the interval that covers 95 % is x ± t σ with the t quantile:
 
 >>> round(interval_factor(15), 3), round(interval_factor(50), 3)
 (2.145, 2.01)
 
 σ itself is left as it is (it estimates the standard deviation); the quantile belongs to the
-interval. ``n_blocks=0`` means unknown (a campaign's merged modes): the normal quantile.
+interval. ``n_blocks=0`` means unknown (PoSER's merged modes when a setup's count is unknown, a
+``SelectedModes`` made by hand): the normal quantile.
 """
 
 from __future__ import annotations
@@ -28,12 +29,10 @@ def interval_factor(n_blocks: int, level: float = 0.95) -> float:
     """The factor of a ``level`` interval x ± factor σ for a σ from ``n_blocks`` blocks.
 
     The Student-t quantile with ``n_blocks − 1`` degrees of freedom (``n_blocks ≥ 2``); the normal
-    quantile (1.96 at 0.95) for ``n_blocks=0``, unknown.
+    quantile (1.96 at 0.95) for ``n_blocks=0``, unknown. ``level`` is in (0, 1 − 1e-9].
     """
     n = check_integer("n_blocks", n_blocks, minimum=0)
-    level = check_real("level", level, low=0.0, high=1.0, low_open=True, high_open=True)
-    if n == 0:
-        return statistics.NormalDist().inv_cdf(0.5 + 0.5 * level)
+    level = check_real("level", level, low=0.0, high=_core.max_interval_level, low_open=True)
     if n == 1:
         raise ValueError("n_blocks must be >= 2 (a σ needs two blocks) or 0 (unknown); got 1")
     return float(_core.interval_factor(n, level))

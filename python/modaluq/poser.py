@@ -229,7 +229,10 @@ def _global_selected(merged, setup_modes, dof_names) -> SelectedModes:
         dropped_frequency_hz=np.zeros(0), dropped_n_poles=np.zeros(0, np.int64), min_cluster_size=0,
         output_names=tuple(dof_names), has_uncertainty=has_unc,
         block_too_short=any_setup("block_too_short"), order_discrepancy=any_setup("order_discrepancy"),
-        mode_covariance=covs)
+        mode_covariance=covs,
+        # the intervals' blocks: the fewest of a setup (each merged σ rests on every setup's; the
+        # conservative count), unknown (0) where a setup's is
+        n_blocks=min((int(s.n_blocks) for s in setup_modes), default=0) if has_unc else 0)
     mpc, mpd = [], []
     for k in range(nm):
         shape = sel.mode_shape[:, k]

@@ -217,7 +217,8 @@ class SelectedModes:
     shape_order: np.ndarray | None = None  #: (n_modes,) its model order
     #: blocks the σ were estimated from (``Result.n_blocks``, the core's count): an interval x ± t σ
     #: takes the Student-t quantile with ``n_blocks − 1`` degrees of freedom (:meth:`intervals`).
-    #: 0: unknown (made by hand, a campaign's merged modes) or no uncertainty: the normal quantile
+    #: (PoSER's merged modes: the fewest of a setup). 0: unknown (made by hand) or no uncertainty:
+    #: the normal quantile
     n_blocks: int = 0
 
     #: the columns of the 95 % intervals in :meth:`to_dataframe` and the exports (:meth:`intervals`)

@@ -40,6 +40,7 @@ def test_interval_factor_takes_n_blocks_minus_one_degrees_of_freedom():
     (dict(n_blocks=2.5), TypeError, "n_blocks"), (dict(n_blocks=True), TypeError, "n_blocks"),
     (dict(n_blocks=10, level=1.0), ValueError, "level"), (dict(n_blocks=10, level=0.0), ValueError, "level"),
     (dict(n_blocks=10, level=float("nan")), ValueError, "level"), (dict(n_blocks=10, level="95%"), TypeError, "level"),
+    (dict(n_blocks=10, level=1 - 1e-10), ValueError, "level"),
 ])
 def test_bad_arguments_are_refused_by_name(kwargs, error, name):
     with pytest.raises(error, match=name):
@@ -80,6 +81,18 @@ def test_selected_modes_intervals_are_f_plus_minus_t_sigma(selected):
     assert ds["selected_frequency_low_95_hz"].attrs["units"] == "Hz"
 
 
+def test_the_intervals_take_the_cores_count_of_blocks(chain):
+    """6,000 samples in 150 blocks: the core cuts the remainder into whole blocks too (153), and
+    every interval takes that count (SciPy's t of it − 1)."""
+    result = modaluq.identify(chain.y, chain.u, fs=chain.fs, orders=range(2, 21, 2), block_rows=15, n_blocks=150)
+    assert result.n_blocks > 150
+    t = student_t.ppf(0.975, result.n_blocks - 1)
+    sel = result.select_modes()
+    assert sel.n_blocks == result.at_order(12).n_blocks == result.stabilization_diagram().n_blocks == result.n_blocks
+    assert sel.interval_factor() == pytest.approx(t, rel=1e-12)
+    assert result.at_order(12).interval_factor() == pytest.approx(t, rel=1e-12)
+
+
 def test_without_uncertainty_there_is_no_interval(chain):
     result = modaluq.identify(chain.y, chain.u, fs=chain.fs, orders=range(2, 31, 2), block_rows=15,
                               uncertainty=False)
@@ -87,6 +100,7 @@ def test_without_uncertainty_there_is_no_interval(chain):
     assert sel.n_blocks == 0 and sel.n_modes >= 4
     assert np.isnan(sel.intervals().to_numpy()).all()
     assert "intervals" not in str(sel)
+    assert sel.to_dict()["interval_95"] == {"level": 0.95, "factor": None, "n_blocks": 0}
 
 
 @pytest.fixture(scope="module")

@@ -75,6 +75,9 @@ def test_poser_global_modes_with_their_sigma(campaign, poser):
         assert sel.shape_order[t] == poser.setup_modes[b].shape_order[poser.mode_index[b, t]]
     assert sel.settings == poser.setup_modes[0].settings
     assert "(orders " + ", ".join(str(int(o)) for o in sel.shape_order) + ")" in str(sel)
+    # the intervals take the fewest blocks of a setup (each setup's the core's count of its record)
+    fewest = min(res.n_blocks for res in poser.setups)
+    assert sel.n_blocks == fewest >= 2 and f"(Student t of {fewest} blocks)" in str(sel)
     assert not poser.reference_check.rejected.any()
 
 

@@ -49,8 +49,8 @@ class SplitHalves(ModeComparison):
 
     halves_s: tuple = ()
     settings: dict = None
-    #: (n_pairs,) the factor t of each pair's 95 % intervals x ± t σ (``SelectedModes.interval_factor``:
-    #: the Student-t quantile of the halves' n_blocks − 1); None: unknown, the normal 1.96
+    #: (n_pairs, 2) the factor t of each half's 95 % intervals x ± t σ (``SelectedModes.interval_factor``:
+    #: the Student-t quantile of that half's n_blocks − 1, the core's count); None: unknown, the normal 1.96
     interval_factor_95: np.ndarray | None = None
 
     @property
@@ -74,14 +74,14 @@ class SplitHalves(ModeComparison):
         for name, z in (("frequency", self.z_frequency_own_sigma), ("damping", self.z_damping_own_sigma)):
             out[f"rms_z_{name}_own_sigma"], out[f"within_{name}_own_sigma"] = rms_and_within(z)
             # the product's 95 % interval x ± t σ read alike: |z| ≤ t of the pair's blocks
-            out[f"within_{name}_own_interval"] = rms_and_within(z * (Z_95 / factor[:, None]))[1]
+            out[f"within_{name}_own_interval"] = rms_and_within(z * (Z_95 / factor))[1]
         return out
 
     def _factor(self) -> np.ndarray:
-        """(n_pairs,) each pair's interval factor (the normal quantile where unknown)."""
+        """(n_pairs, 2) each half's interval factor (the normal quantile where unknown)."""
         if self.interval_factor_95 is None:
-            return np.full(self.frequency_hz.shape[0], Z_95)
-        return np.asarray(self.interval_factor_95, float)
+            return np.full((self.frequency_hz.shape[0], 2), Z_95)
+        return np.asarray(self.interval_factor_95, float).reshape(-1, 2)
 
     def to_dataframe(self):
         """:meth:`ModeComparison.to_dataframe` with the per-record reading's z of each half
@@ -102,7 +102,8 @@ class SplitHalves(ModeComparison):
                          f"{s['rms_z_frequency_own_sigma']:.2f} (f), {s['rms_z_damping_own_sigma']:.2f} (ξ); within "
                          f"±1.96: {100 * s['within_frequency_own_sigma']:.0f} % (f), "
                          f"{100 * s['within_damping_own_sigma']:.0f} % (ξ); within the 95 % interval ± t σ "
-                         f"(t = {self._factor()[0]:.3f}): {100 * s['within_frequency_own_interval']:.0f} % (f), "
+                         f"(t = {', '.join(sorted({f'{t:.3f}' for t in self._factor()[0]}))}): "
+                         f"{100 * s['within_frequency_own_interval']:.0f} % (f), "
                          f"{100 * s['within_damping_own_interval']:.0f} % (ξ). " + OWN_SIGMA_NOTE]
         return "\n".join([f"## Split halves: {a0:g}-{a1:g} s against {b0:g}-{b1:g} s", "",
                           "Settings of both halves: " + ", ".join(f"{k} {v}" for k, v in (self.settings or {}).items()),
@@ -147,7 +148,7 @@ class PooledSplitHalves:
         if not chosen:
             empty2, empty = np.empty((0, 2)), np.empty(0)
             return SplitHalves(empty2, empty2, empty2, empty2, empty, halves_s=(), settings={},
-                               interval_factor_95=np.empty(0))
+                               interval_factor_95=np.empty((0, 2)))
 
         def cat(name):
             return np.concatenate([getattr(c, name) for c in chosen])
@@ -323,8 +324,9 @@ def split_halves(analysis: Analysis, *, max_frequency_difference: float = 0.02, 
     runs, halves_s = _run_halves(analysis)
     c = compare_modes(runs[0].selected, runs[1].selected, **pairing)
     used = runs[0].result.settings
-    factor = runs[0].selected.interval_factor(0.95)  # both halves: the same n_blocks
+    # each half's own factor: its core's count of blocks can differ from the other's by the remainder
+    factor = [run.selected.interval_factor(0.95) for run in runs]
     return SplitHalves(**{f.name: getattr(c, f.name) for f in fields(ModeComparison)},
-                       halves_s=halves_s, interval_factor_95=np.full(c.frequency_hz.shape[0], factor),
+                       halves_s=halves_s, interval_factor_95=np.tile(factor, (c.frequency_hz.shape[0], 1)),
                        settings={k: used[k] for k in ("block_rows", "past_block_rows", "n_blocks")} | {
                            "orders": f"{min(used['orders'])}-{max(used['orders'])}"})

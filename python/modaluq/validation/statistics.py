@@ -196,6 +196,8 @@ class MonteCarloResult:
     #: Student-t quantile with n_blocks − 1 degrees of freedom; 1.96 when n_blocks is unknown)
     frequency_coverage_interval_unflagged: np.ndarray = field(init=False)
     damping_coverage_interval_unflagged: np.ndarray = field(init=False)
+    #: the factor t of those intervals (the Student-t quantile of the core's blocks − 1, :func:`blocks_used`)
+    interval_factor_95: float = field(init=False)
 
     def __post_init__(self):
         rng = np.random.default_rng(np.random.SeedSequence([int(self.settings.get("seed", 0)), 1]))
@@ -229,6 +231,7 @@ class MonteCarloResult:
         with np.errstate(invalid="ignore"):
             set_(self, "noise_coupled_share", (coupled & matched).sum(axis=1) / matched.sum(axis=1))
         t95 = interval_factor(blocks_used(self.settings), 0.95)
+        set_(self, "interval_factor_95", t95)
         for name, values, stds in (("frequency", self.frequency_hz, self.frequency_std),
                                    ("damping", self.damping_ratio, self.damping_std)):
             clean = [_summary(np.where(coupled[m], np.nan, values[m]), stds[m], rng, 0) for m in range(n_methods)]

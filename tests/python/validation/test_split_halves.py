@@ -75,14 +75,20 @@ def test_each_half_read_with_its_own_sigma(record):
     assert "Each half's own σ" in check.report()
     pooled = split_halves_windows(a, (1,))
     assert "own σ: within ±1.96 f, ξ" in pooled.report()
-    # (q): the halves' 95 % intervals ± t σ, t the Student-t quantile of their n_blocks − 1 (SciPy's)
+    # (q): each half's 95 % interval ± t σ, t the Student-t quantile (SciPy's) of that half's blocks − 1,
+    # the core's count of its identification
     from scipy.stats import t as student_t
 
-    factor = student_t.ppf(0.975, check.settings["n_blocks"] - 1)
-    assert s["within_damping_own_interval"] == pytest.approx(np.mean(abs(both) <= factor), rel=1e-12)
-    assert f"(t = {factor:.3f})" in check.report() and "own σ: within ± t σ f, ξ" in pooled.report()
+    # independently: each half through Analysis with the same window and settings, its core's count
+    runs = [a.with_settings(start=s0, stop=s1).run(check_harmonics=False, issue_warnings=False).result
+            for s0, s1 in check.halves_s]
+    factor = np.array([student_t.ppf(0.975, run.n_blocks - 1) for run in runs])
+    assert check.interval_factor_95 == pytest.approx(np.tile(factor, (len(check.mac), 1)), rel=1e-12)
+    both_halves = check.z_damping_own_sigma  # (n_pairs, 2): half h read against its own t
+    assert s["within_damping_own_interval"] == pytest.approx(np.mean(abs(both_halves) <= factor), rel=1e-12)
+    assert f"t = {factor[0]:.3f}" in check.report() and "own σ: within ± t σ f, ξ" in pooled.report()
     assert pooled.pooled().summary()["within_damping_own_interval"] == pytest.approx(
-        np.mean(abs(np.concatenate([c.z_damping_own_sigma.T.ravel() for _, _, c in pooled.checks])) <= factor))
+        np.mean(np.concatenate([abs(c.z_damping_own_sigma) <= c.interval_factor_95 for _, _, c in pooled.checks])))
     # with equal σ in both halves the two readings are one: √(σ² + σ²) = √2 σ
     same = SplitHalves(f, np.column_stack([sf[:, 0], sf[:, 0]]), x, np.column_stack([sx[:, 0], sx[:, 0]]), check.mac)
     assert same.z_frequency_own_sigma[:, 1] == pytest.approx(same.z_frequency, rel=1e-12)

@@ -80,7 +80,11 @@ def test_summary_is_the_statistics_of_the_arrays(mc200):
     # the 95 % interval: Student's t with 50 - 1 degrees of freedom (SciPy's, not the package's)
     from scipy.stats import t as student_t
 
+    from modaluq.validation.statistics import blocks_used
+
+    assert blocks_used(mc200.settings) == 50  # the paper's 9,971 columns make exactly 50 blocks of 199
     factor = student_t.ppf(0.975, 49)
+    assert mc200.interval_factor_95 == pytest.approx(factor, rel=1e-12)
     assert mc200.frequency_coverage_interval_unflagged[m, i] == pytest.approx(np.mean(np.abs(z) <= factor), rel=1e-12)
     assert "coverage of the 95 % interval ± t σ (f), unflagged" in mc200.report()
 
