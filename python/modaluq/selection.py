@@ -526,16 +526,11 @@ def select_modes(diagram, settings: ClusteringSettings | None = None, **kwargs) 
         noise_coupled=np.array([m.size > 0 and bool(np.asarray(diagram.noise_coupled, bool)[m].all())
                                 for m in (np.asarray(m, np.int64) for m in sel.members)], dtype=bool),
         low_signal_to_noise=bool(getattr(diagram, "low_signal_to_noise", False)),
-        n_blocks=_n_blocks(diagram),
+        n_blocks=int(diagram.n_blocks),  # 0 without uncertainty (stabilization_diagram)
     )
     # the words from the codes and numbers (the core's own words are for its C++ users)
     reasons = tuple(dropped_reason_text(modes, k) for k in range(len(modes.dropped_code)))
     return dataclasses.replace(modes, dropped_reason=reasons, **_shape_indicators(diagram, modes))
-
-
-def _n_blocks(diagram) -> int:
-    """The blocks behind the diagram's σ (``Diagram.n_blocks``, the core's count); 0 without uncertainty."""
-    return int(diagram.n_blocks) if diagram.has_uncertainty else 0
 
 
 def _shape_indicators(diagram, modes: SelectedModes) -> dict:
